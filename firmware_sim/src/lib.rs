@@ -1,0 +1,1 @@
+//! Host-side simulation harness and tools for the SatMap ECU runtime.

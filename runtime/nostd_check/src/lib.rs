@@ -1,0 +1,2 @@
+//! no_std canary (placeholder until the core lands).
+#![no_std]
