@@ -7,3 +7,7 @@
 #![deny(missing_docs)]
 
 extern crate alloc;
+
+pub mod calibration;
+pub mod pose;
+pub mod satellite;
