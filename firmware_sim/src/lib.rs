@@ -1,1 +1,7 @@
 //! Host-side simulation harness and tools for the SatMap ECU runtime.
+//!
+//! `cli` holds one module per `satmap-sim` subcommand (arguments + entry point); the other
+//! modules are the libraries those commands and the integration tests use.
+#![deny(missing_docs)]
+
+pub mod cli;

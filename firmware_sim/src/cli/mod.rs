@@ -1,0 +1,1 @@
+//! One module per `satmap-sim` subcommand: its clap arguments and its `run` entry point.
