@@ -1,0 +1,231 @@
+//! The fixed memory arena the harness runs the whole runtime in.
+//!
+//! [`ArenaAllocator`] is a global allocator: embedded-alloc's TLSF heap (O(1), real-time) over
+//! one static region whose size comes from `memory_layout.toml`, wrapped to count current bytes,
+//! peak bytes and allocations. Allocations made before [`ArenaAllocator::init`] (the Rust
+//! runtime's own start-up) go to the system allocator and are freed there; every allocation
+//! after `init` comes from the arena. When the arena is exhausted the allocator writes a report
+//! naming the region and the sizes to stderr (without allocating) and exits with
+//! [`EXIT_ARENA_EXHAUSTED`], instead of the standard library's bare abort.
+
+use core::alloc::{GlobalAlloc, Layout};
+use core::cell::UnsafeCell;
+use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::alloc::System;
+use std::io::Write;
+
+/// Process exit code when the arena cannot satisfy an allocation.
+pub const EXIT_ARENA_EXHAUSTED: i32 = 3;
+
+/// Counters of the arena, as read at one instant.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ArenaStats {
+    /// Arena size, bytes (0 before `init`).
+    pub capacity_bytes: usize,
+    /// Bytes requested by live allocations.
+    pub current_bytes: usize,
+    /// Highest `current_bytes` since `init` or the last `reset_peak`.
+    pub peak_bytes: usize,
+    /// Number of allocations (including reallocations) since `init`.
+    pub allocations: usize,
+}
+
+/// Backing storage of the arena: a static, 16-byte aligned byte array.
+#[repr(C, align(16))]
+pub struct ArenaStorage<const BYTES: usize>(UnsafeCell<[u8; BYTES]>);
+
+// SAFETY: the storage is only ever handed out once, to the allocator, by `ArenaAllocator::init`;
+// every access after that goes through the TLSF heap, which serialises with a critical section.
+unsafe impl<const BYTES: usize> Sync for ArenaStorage<BYTES> {}
+
+impl<const BYTES: usize> ArenaStorage<BYTES> {
+    /// Zeroed storage (placed in .bss, so it costs no file size).
+    #[must_use]
+    pub const fn new() -> Self {
+        Self(UnsafeCell::new([0; BYTES]))
+    }
+
+    /// Size in bytes.
+    #[must_use]
+    pub const fn len(&self) -> usize {
+        BYTES
+    }
+
+    /// True for a zero-sized storage.
+    #[must_use]
+    pub const fn is_empty(&self) -> bool {
+        BYTES == 0
+    }
+
+    fn start(&self) -> usize {
+        self.0.get() as usize
+    }
+}
+
+impl<const BYTES: usize> Default for ArenaStorage<BYTES> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Counting TLSF global allocator over a fixed arena.
+pub struct ArenaAllocator {
+    heap: embedded_alloc::TlsfHeap,
+    ready: AtomicBool,
+    start: AtomicUsize,
+    end: AtomicUsize,
+    current: AtomicUsize,
+    peak: AtomicUsize,
+    allocations: AtomicUsize,
+}
+
+impl ArenaAllocator {
+    /// An allocator that serves from the system until [`init`](Self::init).
+    #[must_use]
+    pub const fn new() -> Self {
+        Self {
+            heap: embedded_alloc::TlsfHeap::empty(),
+            ready: AtomicBool::new(false),
+            start: AtomicUsize::new(0),
+            end: AtomicUsize::new(0),
+            current: AtomicUsize::new(0),
+            peak: AtomicUsize::new(0),
+            allocations: AtomicUsize::new(0),
+        }
+    }
+
+    /// Hand the first `size_bytes` of `storage` to the heap; from now on every allocation comes
+    /// from the arena. Returns `false` (and changes nothing) if already initialised or if
+    /// `size_bytes` is zero or larger than the storage.
+    pub fn init<const BYTES: usize>(
+        &self,
+        storage: &'static ArenaStorage<BYTES>,
+        size_bytes: usize,
+    ) -> bool {
+        if size_bytes == 0 || size_bytes > BYTES || self.ready.load(Ordering::Acquire) {
+            return false;
+        }
+        let start = storage.start();
+        // SAFETY: `storage` is 'static, unused by anyone else (it is only ever passed here, and
+        // `ready` guards against a second call), and `size_bytes <= BYTES`.
+        unsafe { self.heap.init(start, size_bytes) };
+        self.start.store(start, Ordering::Relaxed);
+        self.end.store(start + size_bytes, Ordering::Relaxed);
+        self.ready.store(true, Ordering::Release);
+        true
+    }
+
+    /// Current counters.
+    #[must_use]
+    pub fn stats(&self) -> ArenaStats {
+        let ready = self.ready.load(Ordering::Acquire);
+        ArenaStats {
+            capacity_bytes: if ready {
+                self.end.load(Ordering::Relaxed) - self.start.load(Ordering::Relaxed)
+            } else {
+                0
+            },
+            current_bytes: self.current.load(Ordering::Relaxed),
+            peak_bytes: self.peak.load(Ordering::Relaxed),
+            allocations: self.allocations.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Restart the peak from the current usage (e.g. after warm-up).
+    pub fn reset_peak(&self) {
+        self.peak
+            .store(self.current.load(Ordering::Relaxed), Ordering::Relaxed);
+    }
+
+    fn in_arena(&self, ptr: *mut u8) -> bool {
+        let p = ptr as usize;
+        self.ready.load(Ordering::Acquire)
+            && p >= self.start.load(Ordering::Relaxed)
+            && p < self.end.load(Ordering::Relaxed)
+    }
+
+    fn exhausted(&self, layout: Layout) -> ! {
+        let s = self.stats();
+        let mut buf = FixedBuf::<256>::new();
+        let _ = core::fmt::write(
+            &mut buf,
+            format_args!(
+                "ERROR(arena): region `arena` ({} bytes, from memory_layout.toml [arena]) cannot \
+                 serve {} more bytes: {} in use, peak {}.\n",
+                s.capacity_bytes,
+                layout.size(),
+                s.current_bytes,
+                s.peak_bytes
+            ),
+        );
+        let _ = std::io::stderr().write_all(buf.as_bytes());
+        std::process::exit(EXIT_ARENA_EXHAUSTED)
+    }
+}
+
+impl Default for ArenaAllocator {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+// SAFETY: allocations after `init` come from the TLSF heap over the arena, earlier ones from the
+// system allocator; `dealloc` routes each pointer back by address range, so every block returns
+// to the allocator that made it.
+unsafe impl GlobalAlloc for ArenaAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if !self.ready.load(Ordering::Acquire) {
+            // SAFETY: forwarded with the caller's layout.
+            return unsafe { System.alloc(layout) };
+        }
+        // SAFETY: forwarded with the caller's layout.
+        let ptr = unsafe { GlobalAlloc::alloc(&self.heap, layout) };
+        if ptr.is_null() {
+            self.exhausted(layout);
+        }
+        let now = self.current.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
+        self.peak.fetch_max(now, Ordering::Relaxed);
+        self.allocations.fetch_add(1, Ordering::Relaxed);
+        ptr
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if self.in_arena(ptr) {
+            self.current.fetch_sub(layout.size(), Ordering::Relaxed);
+            // SAFETY: `ptr` came from the heap with this layout.
+            unsafe { GlobalAlloc::dealloc(&self.heap, ptr, layout) }
+        } else {
+            // SAFETY: `ptr` came from the system allocator with this layout.
+            unsafe { System.dealloc(ptr, layout) }
+        }
+    }
+}
+
+/// A stack buffer that `core::fmt` can write into without allocating.
+struct FixedBuf<const N: usize> {
+    bytes: [u8; N],
+    len: usize,
+}
+
+impl<const N: usize> FixedBuf<N> {
+    const fn new() -> Self {
+        Self {
+            bytes: [0; N],
+            len: 0,
+        }
+    }
+
+    fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..self.len]
+    }
+}
+
+impl<const N: usize> core::fmt::Write for FixedBuf<N> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let room = N - self.len;
+        let take = s.len().min(room);
+        self.bytes[self.len..self.len + take].copy_from_slice(&s.as_bytes()[..take]);
+        self.len += take;
+        Ok(())
+    }
+}

@@ -1,0 +1,155 @@
+//! The `manifest.toml` schema and the interface each stage must present to the runtime.
+
+use serde::Deserialize;
+
+use super::BundleError;
+use crate::engine::Stage;
+use crate::model_dims::ModelDims;
+
+/// Element type of a stage tensor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DType {
+    /// Unsigned bytes (images).
+    U8,
+    /// 64-bit signed integers (camera index).
+    I64,
+    /// 32-bit floats.
+    F32,
+}
+
+/// Name, shape and dtype of one stage input or output.
+#[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
+pub struct TensorSpec {
+    /// Tensor name in the graph.
+    pub name: String,
+    /// Static shape.
+    pub shape: Vec<usize>,
+    /// Element type.
+    pub dtype: DType,
+}
+
+/// One `[[stage]]` of the manifest.
+#[derive(Clone, Debug, Deserialize)]
+pub struct StageEntry {
+    /// Stage name (see [`Stage::name`]).
+    pub name: String,
+    /// Graph file, relative to the bundle folder.
+    pub file: String,
+    /// Hex SHA-256 of the file.
+    pub sha256: String,
+    /// Inputs in graph order.
+    pub inputs: Vec<TensorSpec>,
+    /// Outputs in graph order.
+    pub outputs: Vec<TensorSpec>,
+}
+
+/// The whole manifest.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Manifest {
+    /// Model dimensions and configuration.
+    pub model: ModelDims,
+    /// The stages.
+    #[serde(rename = "stage")]
+    pub stages: Vec<StageEntry>,
+}
+
+impl Manifest {
+    /// The entry of `stage`.
+    pub fn stage(&self, stage: Stage) -> Result<&StageEntry, BundleError> {
+        self.stages
+            .iter()
+            .find(|s| s.name == stage.name())
+            .ok_or(BundleError::MissingStage {
+                stage: stage.name(),
+            })
+    }
+}
+
+/// The interface the runtime's buffers give `stage` for `dims`: (inputs, outputs).
+#[must_use]
+pub fn expected_interface(stage: Stage, dims: &ModelDims) -> (Vec<TensorSpec>, Vec<TensorSpec>) {
+    let t = |name: &str, shape: &[usize], dtype| TensorSpec {
+        name: name.to_owned(),
+        shape: shape.to_vec(),
+        dtype,
+    };
+    let d = dims.embed_dims;
+    let q = dims.bev_h * dims.bev_w;
+    let bev = [dims.bev_h, dims.bev_w, d];
+    match stage {
+        Stage::ImageEncoder => (
+            vec![
+                t("image", &[dims.image_h, dims.image_w, 3], DType::U8),
+                t("camera_index", &[1], DType::I64),
+            ],
+            vec![t("value", &[dims.feat_h * dims.feat_w, d], DType::F32)],
+        ),
+        Stage::BevQuery => (
+            vec![t("can_bus", &[18], DType::F32)],
+            vec![
+                t("bev_query", &[q, d], DType::F32),
+                t("gkt_weights", &[q, 4, dims.kernel_h * dims.kernel_w], DType::F32),
+            ],
+        ),
+        Stage::BevEncoder => (
+            vec![
+                t("bev_query", &[q, d], DType::F32),
+                t("gathered", &[q, d], DType::F32),
+            ],
+            vec![t("camera_bev", &bev, DType::F32)],
+        ),
+        Stage::SatelliteEncoder => (
+            vec![t("satellite", &[dims.sat_h, dims.sat_w, 3], DType::U8)],
+            vec![t("satellite_bev", &bev, DType::F32)],
+        ),
+        Stage::MapDecoder => (
+            vec![
+                t("camera_bev", &bev, DType::F32),
+                t("satellite_bev", &bev, DType::F32),
+            ],
+            vec![
+                t("class_logits", &[dims.num_vec, 3], DType::F32),
+                t("points", &[dims.num_vec, dims.num_pts, 2], DType::F32),
+            ],
+        ),
+    }
+}
+
+impl StageEntry {
+    /// Check that this entry declares exactly the interface the runtime feeds `stage`.
+    pub fn check_interface(&self, stage: Stage, dims: &ModelDims) -> Result<(), BundleError> {
+        let (inputs, outputs) = expected_interface(stage, dims);
+        check_list(stage, "input", &self.inputs, &inputs)?;
+        check_list(stage, "output", &self.outputs, &outputs)
+    }
+}
+
+fn check_list(
+    stage: Stage,
+    what: &'static str,
+    found: &[TensorSpec],
+    expected: &[TensorSpec],
+) -> Result<(), BundleError> {
+    if found.len() != expected.len() {
+        return Err(BundleError::Interface {
+            stage: stage.name(),
+            what,
+            tensor: "*".into(),
+            found: format!("{} tensors", found.len()),
+            expected: format!("{} tensors", expected.len()),
+        });
+    }
+    for (f, e) in found.iter().zip(expected) {
+        if f != e {
+            return Err(BundleError::Interface {
+                stage: stage.name(),
+                what,
+                tensor: e.name.clone(),
+                found: format!("{} {:?} {:?}", f.name, f.dtype, f.shape),
+                expected: format!("{} {:?} {:?}", e.name, e.dtype, e.shape),
+            });
+        }
+    }
+    Ok(())
+}
