@@ -9,5 +9,6 @@
 extern crate alloc;
 
 pub mod calibration;
+pub mod geo;
 pub mod pose;
 pub mod satellite;
