@@ -1,0 +1,77 @@
+"""Export-friendly sampling: bilinear sampling as one Gather of the four corners plus weights
+(replaces `grid_sample`, which tract runs as a slow reference op), and bilinear resizing as two
+constant matrices (replaces `Resize`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def bilinear_gather_sum(
+    value: torch.Tensor, loc: torch.Tensor, attn: torch.Tensor, h: int, w: int
+) -> torch.Tensor:
+    """Multi-head deformable sampling over one level, the same math as
+    `grid_sample(value, 2 * loc - 1, align_corners=False, padding_mode="zeros")` followed by the
+    attention-weighted sum over points.
+
+    value: [h * w, heads, dh] (row-major map); loc: [N, heads, P, 2] normalised (x, y) in [0, 1];
+    attn: [N, heads, P]. Returns [N, heads * dh]."""
+    hw, heads, dh = value.shape
+    n, _, p, _ = loc.shape
+    v = value.permute(1, 0, 2).reshape(heads * hw, dh)
+    x = loc[..., 0] * float(w) - 0.5
+    y = loc[..., 1] * float(h) - 0.5
+    x0 = torch.floor(x)
+    y0 = torch.floor(y)
+    fx = x - x0
+    fy = y - y0
+    x1 = x0 + 1.0
+    y1 = y0 + 1.0
+    gx = 1.0 - fx
+    gy = 1.0 - fy
+    xs = torch.cat([x0, x1, x0, x1], dim=-1)  # [N, heads, 4P]
+    ys = torch.cat([y0, y0, y1, y1], dim=-1)
+    wts = torch.cat([gx * gy, fx * gy, gx * fy, fx * fy], dim=-1)
+    inside = (xs >= 0.0) & (xs <= float(w - 1)) & (ys >= 0.0) & (ys <= float(h - 1))
+    a = attn.repeat(1, 1, 4)
+    wts = wts * a * inside.to(wts.dtype)
+    xi = torch.clamp(xs, 0.0, float(w - 1)).to(torch.int64)
+    yi = torch.clamp(ys, 0.0, float(h - 1)).to(torch.int64)
+    head_off = (torch.arange(heads, dtype=torch.int64) * hw).view(1, heads, 1)
+    flat = yi * w + xi + head_off  # [N, heads, 4P]
+    g = v[flat.reshape(-1)].reshape(n, heads, 4 * p, dh)
+    out = (g * wts.unsqueeze(-1)).sum(dim=2)  # [N, heads, dh]
+    return out.reshape(n, heads * dh)
+
+
+def resize_matrix(n_in: int, n_out: int) -> np.ndarray:
+    """[n_out, n_in] matrix of 1-D bilinear interpolation with PyTorch's
+    `interpolate(mode="bilinear", align_corners=False)` coordinate rule."""
+    m = np.zeros((n_out, n_in), dtype=np.float64)
+    scale = n_in / n_out
+    for d in range(n_out):
+        src = max((d + 0.5) * scale - 0.5, 0.0)
+        i0 = min(int(np.floor(src)), n_in - 1)
+        i1 = min(i0 + 1, n_in - 1)
+        l1 = src - i0
+        m[d, i0] += 1.0 - l1
+        m[d, i1] += l1
+    return m.astype(np.float32)
+
+
+class Resize2d(torch.nn.Module):
+    """Bilinear resize of a [C, H, W] map to a fixed size as `A_h @ x @ A_w^T` (two MatMuls with
+    constant matrices): same values as `F.interpolate(..., mode="bilinear",
+    align_corners=False)`, no Resize op in the graph."""
+
+    def __init__(self, in_hw: tuple[int, int], out_hw: tuple[int, int]):
+        super().__init__()
+        self.register_buffer("a_h", torch.from_numpy(resize_matrix(in_hw[0], out_hw[0])))
+        self.register_buffer("a_w_t", torch.from_numpy(resize_matrix(in_hw[1], out_hw[1]).T.copy()))
+        self.identity = tuple(in_hw) == tuple(out_hw)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.identity:
+            return x
+        return torch.matmul(torch.matmul(self.a_h, x), self.a_w_t)
