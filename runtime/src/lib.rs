@@ -11,4 +11,5 @@ extern crate alloc;
 pub mod calibration;
 pub mod geo;
 pub mod pose;
+pub mod route_pack;
 pub mod satellite;

@@ -1,0 +1,506 @@
+//! The ego-centred crop: [`PackSource`] samples the pack under the crop window of
+//! `ARCHITECTURE.md` ("Ego pose, satellite crop geometry"), bilinear and continuous across tile
+//! seams, and prefetches tiles ahead along the route.
+//!
+//! Crop pixel `(r, c)` samples ego point `x_e = x_min + (c + 0.5) gsd`, `y_e = y_min + (r + 0.5)
+//! gsd`, at route point `position + x_e (sin yaw, -cos yaw) + y_e (cos yaw, sin yaw)`. In pack
+//! pixels that point is `u = x / pack_gsd - 0.5`, `v = y / pack_gsd - 0.5` (pixel centres at
+//! integers, `FORMAT.md`), and the value is the bilinear blend of the four pack pixels around
+//! `(u, v)`, rounded half up. A crop pixel is *covered* when all four pack pixels lie in verified
+//! tiles; otherwise it is [`FILL_RGB`]. Bilinear sampling does not low-pass: a crop much coarser
+//! than the pack aliases, so build packs at the crop's ground sampling distance.
+
+use glam::DVec2;
+
+use super::cache::{PREFETCH_TILES_PER_STEP, TileCache, TileState};
+use super::format::{CHANNELS, PackError, RoutePack, TileKey};
+use crate::pose::EgoPose;
+use crate::satellite::{Coverage, CropSpec, SatelliteSource};
+
+/// Colour written where the pack has no verified imagery (black, like the zero padding the
+/// image encoders see).
+pub const FILL_RGB: [u8; 3] = [0, 0, 0];
+/// Most pack tiles one crop may span (its bounding box in tile units). A 400 x 200 crop at the
+/// pack's resolution spans at most 3 x 3 tiles of 256 px at any yaw; 6 x 6 leaves room for
+/// smaller tiles or larger crops.
+pub const MAX_CROP_TILES: usize = 36;
+/// Most points sampled ahead along the route per step when choosing tiles to prefetch.
+const MAX_PREFETCH_SAMPLES: usize = 16;
+/// Route segments searched behind / ahead of the last nearest one before a full scan.
+const ROUTE_SEARCH_BACK: usize = 16;
+const ROUTE_SEARCH_AHEAD: usize = 128;
+
+/// Why a crop could not be attempted (the output is all fill and coverage is `None`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CropFault {
+    /// `out` is not `height_px * width_px * 3` bytes.
+    OutputSize,
+    /// The pose has a non-finite field.
+    PoseNotFinite,
+    /// The crop spec has a zero size or a non-finite or non-positive resolution or origin.
+    BadSpec,
+    /// The crop spans more than [`MAX_CROP_TILES`] tiles.
+    TooManyTiles {
+        /// Tiles in the crop's bounding box.
+        tiles: usize,
+    },
+}
+
+/// What one crop delivered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CropReport {
+    /// Coverage verdict returned through [`SatelliteSource::crop`].
+    pub coverage: Coverage,
+    /// Pixels sampled from verified imagery.
+    pub covered_px: u32,
+    /// Pixels in the crop.
+    pub total_px: u32,
+    /// Corrupt tiles the crop would have sampled (not used).
+    pub corrupt_tiles: u8,
+    /// One of those corrupt tiles, for the log.
+    pub first_corrupt: Option<TileKey>,
+    /// Tiles hashed this step (crop and prefetch); at most
+    /// `MAX_CROP_TILES + PREFETCH_TILES_PER_STEP`.
+    pub verified_tiles: u8,
+    /// Of those, hashed ahead on the route.
+    pub prefetched_tiles: u8,
+    /// Set when the crop could not be attempted.
+    pub fault: Option<CropFault>,
+}
+
+impl CropReport {
+    const EMPTY: Self = Self {
+        coverage: Coverage::None,
+        covered_px: 0,
+        total_px: 0,
+        corrupt_tiles: 0,
+        first_corrupt: None,
+        verified_tiles: 0,
+        prefetched_tiles: 0,
+        fault: None,
+    };
+
+    /// Covered fraction, thousandths (0..=1000).
+    #[must_use]
+    pub fn covered_permille(&self) -> u16 {
+        if self.total_px == 0 {
+            return 0;
+        }
+        (u64::from(self.covered_px) * 1000 / u64::from(self.total_px)) as u16
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Slot<'a> {
+    Missing,
+    Corrupt(TileKey),
+    Ready(&'a [u8]),
+}
+
+/// The pack tiles under one crop, resolved and verified once per step so the pixel loop only
+/// indexes an array.
+struct TileWindow<'a> {
+    slots: [Slot<'a>; MAX_CROP_TILES],
+    tile_x0: i64,
+    tile_y0: i64,
+    cols: i64,
+    rows: i64,
+    size_px: i64,
+}
+
+impl<'a> TileWindow<'a> {
+    #[inline]
+    fn texel(&self, tx: i64, ty: i64, lx: i64, ly: i64) -> Result<&'a [u8], Slot<'a>> {
+        let (col, row) = (tx - self.tile_x0, ty - self.tile_y0);
+        if col < 0 || row < 0 || col >= self.cols || row >= self.rows {
+            return Err(Slot::Missing);
+        }
+        match self.slots.get((row * self.cols + col) as usize) {
+            Some(Slot::Ready(px)) => {
+                let off = ((ly * self.size_px + lx) as usize) * CHANNELS;
+                px.get(off..off + CHANNELS).ok_or(Slot::Missing)
+            }
+            Some(other) => Err(*other),
+            None => Err(Slot::Missing),
+        }
+    }
+}
+
+/// The pack-backed satellite source: crop, coverage, tile cache and route-ahead prefetch.
+#[derive(Clone, Debug)]
+pub struct PackSource<'a> {
+    pack: RoutePack<'a>,
+    cache: TileCache,
+    route_cursor: usize,
+    last: CropReport,
+}
+
+impl<'a> PackSource<'a> {
+    /// A source over a validated pack.
+    #[must_use]
+    pub const fn new(pack: RoutePack<'a>) -> Self {
+        Self {
+            pack,
+            cache: TileCache::new(),
+            route_cursor: 0,
+            last: CropReport::EMPTY,
+        }
+    }
+
+    /// Validate `bytes` as a pack (in place) and make a source over it.
+    ///
+    /// # Errors
+    /// The pack's load error.
+    pub fn from_bytes(bytes: &'a [u8]) -> Result<Self, PackError> {
+        RoutePack::parse(bytes).map(Self::new)
+    }
+
+    /// The pack.
+    #[must_use]
+    pub const fn pack(&self) -> &RoutePack<'a> {
+        &self.pack
+    }
+
+    /// The tile cache.
+    #[must_use]
+    pub const fn cache(&self) -> &TileCache {
+        &self.cache
+    }
+
+    /// Report of the last crop.
+    #[must_use]
+    pub const fn last_report(&self) -> &CropReport {
+        &self.last
+    }
+
+    /// Crop around `pose` into `out` and return the full report (also kept as
+    /// [`Self::last_report`]). Writes every byte of `out`; does not allocate.
+    pub fn crop_with_report(
+        &mut self,
+        pose: &EgoPose,
+        spec: &CropSpec,
+        out: &mut [u8],
+    ) -> CropReport {
+        self.cache.begin_step();
+        let mut report = CropReport::EMPTY;
+        report.total_px =
+            u32::try_from(spec.height_px.saturating_mul(spec.width_px)).unwrap_or(u32::MAX);
+        let fault = self.sample(pose, spec, out, &mut report).err();
+        if let Some(fault) = fault {
+            fill(out);
+            report.fault = Some(fault);
+            report.covered_px = 0;
+            report.corrupt_tiles = 0;
+            report.first_corrupt = None;
+        } else {
+            let verified_for_crop = self.cache.verified_this_step();
+            self.prefetch(pose, spec);
+            report.prefetched_tiles = sat_u8(self.cache.verified_this_step() - verified_for_crop);
+        }
+        report.verified_tiles = sat_u8(self.cache.verified_this_step());
+        report.coverage = if report.corrupt_tiles > 0 {
+            Coverage::Corrupt
+        } else if report.fault.is_none() && report.covered_px == report.total_px {
+            Coverage::Full
+        } else if report.covered_px == 0 {
+            Coverage::None
+        } else {
+            Coverage::Partial {
+                covered_permille: report.covered_permille().clamp(1, 999),
+            }
+        };
+        self.last = report;
+        report
+    }
+
+    fn sample(
+        &mut self,
+        pose: &EgoPose,
+        spec: &CropSpec,
+        out: &mut [u8],
+        report: &mut CropReport,
+    ) -> Result<(), CropFault> {
+        let (h, w) = (spec.height_px, spec.width_px);
+        if h.checked_mul(w).and_then(|n| n.checked_mul(CHANNELS)) != Some(out.len()) {
+            return Err(CropFault::OutputSize);
+        }
+        if !pose.is_finite() {
+            return Err(CropFault::PoseNotFinite);
+        }
+        let spec_ok = h > 0
+            && w > 0
+            && report.total_px != u32::MAX
+            && spec.gsd_m.is_finite()
+            && spec.gsd_m > 0.0
+            && spec.x_min_m.is_finite()
+            && spec.y_min_m.is_finite();
+        if !spec_ok {
+            return Err(CropFault::BadSpec);
+        }
+        let pack_gsd_m = self.pack.header().gsd_m;
+        let (sin, cos) = libm::sincos(pose.yaw_rad);
+        let right = DVec2::new(sin, -cos);
+        let forward = DVec2::new(cos, sin);
+        let first = pose.position_m
+            + right * (spec.x_min_m + 0.5 * spec.gsd_m)
+            + forward * (spec.y_min_m + 0.5 * spec.gsd_m);
+        // Pack-pixel coordinates are affine in (c, r): p(c, r) = p00 + c * dc + r * dr.
+        let p00 = first / pack_gsd_m - DVec2::splat(0.5);
+        let dc = right * (spec.gsd_m / pack_gsd_m);
+        let dr = forward * (spec.gsd_m / pack_gsd_m);
+        let (last_c, last_r) = ((w - 1) as f64, (h - 1) as f64);
+        let corners = [
+            p00,
+            p00 + dc * last_c,
+            p00 + dr * last_r,
+            p00 + dc * last_c + dr * last_r,
+        ];
+        let lo = corners
+            .iter()
+            .fold(DVec2::splat(f64::INFINITY), |a, p| a.min(*p));
+        let hi = corners
+            .iter()
+            .fold(DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+        let size_px = i64::from(self.pack.header().tile_size_px);
+        // Tile indices are i32 in the pack; anything beyond is simply off the pack.
+        let limit_px = f64::from(i32::MAX) * size_px as f64;
+        if !(lo.abs().max_element() < limit_px && hi.abs().max_element() < limit_px) {
+            fill(out);
+            return Ok(());
+        }
+        // One pixel of margin on each side absorbs rounding between corners and the pixel loop.
+        let tile_x0 = (libm::floor(lo.x) as i64 - 1).div_euclid(size_px);
+        let tile_y0 = (libm::floor(lo.y) as i64 - 1).div_euclid(size_px);
+        let tile_x1 = (libm::floor(hi.x) as i64 + 2).div_euclid(size_px);
+        let tile_y1 = (libm::floor(hi.y) as i64 + 2).div_euclid(size_px);
+        let (cols, rows) = (tile_x1 - tile_x0 + 1, tile_y1 - tile_y0 + 1);
+        let tiles = (cols * rows) as usize;
+        if tiles > MAX_CROP_TILES {
+            return Err(CropFault::TooManyTiles { tiles });
+        }
+        let mut window = TileWindow {
+            slots: [Slot::Missing; MAX_CROP_TILES],
+            tile_x0,
+            tile_y0,
+            cols,
+            rows,
+            size_px,
+        };
+        for (k, slot) in window.slots.iter_mut().take(tiles).enumerate() {
+            let (col, row) = (k as i64 % cols, k as i64 / cols);
+            let (Ok(tx), Ok(ty)) = (i32::try_from(tile_x0 + col), i32::try_from(tile_y0 + row))
+            else {
+                continue;
+            };
+            let key = TileKey::new(tx, ty);
+            let Some(i) = self.pack.find_tile(key) else {
+                continue;
+            };
+            *slot = match (
+                self.cache.get_or_verify(&self.pack, i),
+                self.pack.tile_payload_unverified(i),
+            ) {
+                (TileState::Verified, Some(px)) => Slot::Ready(px),
+                _ => Slot::Corrupt(key),
+            };
+        }
+        let mut covered = 0u32;
+        let mut corrupt_seen = [false; MAX_CROP_TILES];
+        let mut pixels = out.chunks_exact_mut(CHANNELS);
+        for r in 0..h {
+            let row_start = p00 + dr * r as f64;
+            for c in 0..w {
+                let Some(dst) = pixels.next() else {
+                    return Ok(());
+                };
+                let p = row_start + dc * c as f64;
+                match bilinear(&window, p) {
+                    Ok(rgb) => {
+                        dst.copy_from_slice(&rgb);
+                        covered += 1;
+                    }
+                    Err(slot) => {
+                        dst.copy_from_slice(&FILL_RGB);
+                        if let Slot::Corrupt(key) = slot {
+                            let k = ((i64::from(key.tile_y) - tile_y0) * cols
+                                + i64::from(key.tile_x)
+                                - tile_x0) as usize;
+                            if let Some(seen) = corrupt_seen.get_mut(k)
+                                && !*seen
+                            {
+                                *seen = true;
+                                report.corrupt_tiles += 1;
+                                report.first_corrupt.get_or_insert(key);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        report.covered_px = covered;
+        Ok(())
+    }
+
+    /// Verify up to [`PREFETCH_TILES_PER_STEP`] uncached tiles that crops further along the route
+    /// will need: tiles within the crop's reach of points sampled every half tile over the next
+    /// two tiles of route.
+    fn prefetch(&mut self, pose: &EgoPose, spec: &CropSpec) {
+        let points = self.pack.route_point_count();
+        if points < 2 {
+            return;
+        }
+        let side_m = self.pack.tile_side_m();
+        let Some((segment, start)) = self.nearest_on_route(pose.position_m, side_m) else {
+            return;
+        };
+        self.route_cursor = segment;
+        let x_far_m = spec
+            .x_min_m
+            .abs()
+            .max((spec.x_min_m + spec.width_px as f64 * spec.gsd_m).abs());
+        let y_far_m = spec
+            .y_min_m
+            .abs()
+            .max((spec.y_min_m + spec.height_px as f64 * spec.gsd_m).abs());
+        let reach_m = libm::hypot(x_far_m, y_far_m);
+        let step_m = 0.5 * side_m;
+        let budget_start = self.cache.verified_this_step();
+        let mut to_next_m = step_m;
+        let mut from = start;
+        let mut samples = 0;
+        for seg in segment..points - 1 {
+            let Some(to) = self.pack.route_point(seg + 1) else {
+                break;
+            };
+            let seg_len_m = from.distance(to);
+            let mut along_m = 0.0;
+            while along_m + to_next_m <= seg_len_m {
+                along_m += to_next_m;
+                to_next_m = step_m;
+                let p = from + (to - from) * (along_m / seg_len_m);
+                if self.prefetch_around(p, reach_m, budget_start)
+                    || samples + 1 >= MAX_PREFETCH_SAMPLES
+                {
+                    return;
+                }
+                samples += 1;
+            }
+            to_next_m -= seg_len_m - along_m;
+            from = to;
+        }
+    }
+
+    /// Verify uncached tiles within `reach_m` of `p`; true when the step's budget is spent.
+    fn prefetch_around(&mut self, p: DVec2, reach_m: f64, budget_start: usize) -> bool {
+        let side_m = self.pack.tile_side_m();
+        let tx0 = libm::floor((p.x - reach_m) / side_m) as i32;
+        let tx1 = libm::floor((p.x + reach_m) / side_m) as i32;
+        let ty0 = libm::floor((p.y - reach_m) / side_m) as i32;
+        let ty1 = libm::floor((p.y + reach_m) / side_m) as i32;
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                if self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP {
+                    return true;
+                }
+                let Some(i) = self.pack.find_tile(TileKey::new(tx, ty)) else {
+                    continue;
+                };
+                if self.cache.peek(i).is_none() {
+                    self.cache.get_or_verify(&self.pack, i);
+                }
+            }
+        }
+        self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP
+    }
+
+    /// Nearest route segment to `p` and the nearest point on it. Searches around the last
+    /// answer first; a full scan only when the vehicle is not near that stretch.
+    fn nearest_on_route(&self, p: DVec2, near_m: f64) -> Option<(usize, DVec2)> {
+        let segments = self.pack.route_point_count().checked_sub(1)?;
+        let lo = self
+            .route_cursor
+            .saturating_sub(ROUTE_SEARCH_BACK)
+            .min(segments);
+        let hi = (self.route_cursor + ROUTE_SEARCH_AHEAD).min(segments);
+        let local = self.nearest_in(p, lo, hi);
+        match local {
+            Some((_, _, d)) if d <= near_m => local.map(|(s, q, _)| (s, q)),
+            _ => self.nearest_in(p, 0, segments).map(|(s, q, _)| (s, q)),
+        }
+    }
+
+    fn nearest_in(&self, p: DVec2, lo: usize, hi: usize) -> Option<(usize, DVec2, f64)> {
+        let mut best: Option<(usize, DVec2, f64)> = None;
+        for seg in lo..hi {
+            let (Some(a), Some(b)) = (self.pack.route_point(seg), self.pack.route_point(seg + 1))
+            else {
+                break;
+            };
+            let ab = b - a;
+            let len2 = ab.length_squared();
+            let t = if len2 > 0.0 {
+                ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q = a + ab * t;
+            let d = q.distance(p);
+            if best.is_none_or(|(_, _, bd)| d < bd) {
+                best = Some((seg, q, d));
+            }
+        }
+        best
+    }
+}
+
+impl SatelliteSource for PackSource<'_> {
+    fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage {
+        self.crop_with_report(pose, spec, out).coverage
+    }
+}
+
+/// Bilinear sample at pack-pixel coordinates `p`, or the slot that stopped it.
+#[inline]
+fn bilinear<'a>(window: &TileWindow<'a>, p: DVec2) -> Result<[u8; 3], Slot<'a>> {
+    let (uf, vf) = (libm::floor(p.x), libm::floor(p.y));
+    let (fx, fy) = ((p.x - uf) as f32, (p.y - vf) as f32);
+    let s = window.size_px;
+    let (x0, y0) = (uf as i64, vf as i64);
+    let (tx0, lx0) = (x0.div_euclid(s), x0.rem_euclid(s));
+    let (ty0, ly0) = (y0.div_euclid(s), y0.rem_euclid(s));
+    let (tx1, lx1) = if lx0 + 1 == s {
+        (tx0 + 1, 0)
+    } else {
+        (tx0, lx0 + 1)
+    };
+    let (ty1, ly1) = if ly0 + 1 == s {
+        (ty0 + 1, 0)
+    } else {
+        (ty0, ly0 + 1)
+    };
+    let a = window.texel(tx0, ty0, lx0, ly0)?;
+    let b = window.texel(tx1, ty0, lx1, ly0)?;
+    let c = window.texel(tx0, ty1, lx0, ly1)?;
+    let d = window.texel(tx1, ty1, lx1, ly1)?;
+    let mut rgb = [0u8; 3];
+    for (k, dst) in rgb.iter_mut().enumerate() {
+        let at = |t: &[u8]| f32::from(t.get(k).copied().unwrap_or(0));
+        let south = at(a) + (at(b) - at(a)) * fx;
+        let north = at(c) + (at(d) - at(c)) * fx;
+        // `as u8` saturates; values are within [0, 255] anyway.
+        *dst = (south + (north - south) * fy + 0.5) as u8;
+    }
+    Ok(rgb)
+}
+
+fn fill(out: &mut [u8]) {
+    for px in out.chunks_mut(CHANNELS) {
+        for (dst, src) in px.iter_mut().zip(FILL_RGB) {
+            *dst = src;
+        }
+    }
+}
+
+fn sat_u8(n: usize) -> u8 {
+    u8::try_from(n).unwrap_or(u8::MAX)
+}
