@@ -67,6 +67,8 @@ class TemporalSelfAttention(nn.Module):
             [xs.view(1, -1).expand(bev_h, bev_w), ys.view(-1, 1).expand(bev_h, bev_w)], dim=-1
         ).reshape(bev_h * bev_w, 2)
         self.register_buffer("ref_2d", ref)
+        self.register_buffer("offset_norm", torch.tensor([float(bev_w), float(bev_h)]),
+                             persistent=False)
 
     def forward(self, query: torch.Tensor, query_pos: torch.Tensor) -> torch.Tensor:
         q_n, d = query.shape
@@ -76,8 +78,7 @@ class TemporalSelfAttention(nn.Module):
         value = self.value_proj(query).reshape(q_n, nh, d // nh)
         off = self.sampling_offsets(qcat).view(q_n, nh, nq, npt, 2)
         attn = self.attention_weights(qcat).view(q_n, nh, nq, npt).softmax(-1)
-        norm = torch.tensor([self.bev_w, self.bev_h], dtype=torch.float32)
-        loc = self.ref_2d.view(q_n, 1, 1, 1, 2) + off / norm
+        loc = self.ref_2d.view(q_n, 1, 1, 1, 2) + off / self.offset_norm
         # Both queue entries sample the same value: fold the queue into the points and average.
         loc = loc.reshape(q_n, nh, nq * npt, 2)
         attn = attn.reshape(q_n, nh, nq * npt) * (1.0 / nq)

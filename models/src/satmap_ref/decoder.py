@@ -69,6 +69,8 @@ class CustomMSDeformableAttention(nn.Module):
         self.attention_weights = nn.Linear(d, heads * points)
         self.value_proj = nn.Linear(d, d)
         self.output_proj = nn.Linear(d, d)
+        self.register_buffer("offset_norm", torch.tensor([float(bev_w), float(bev_h)]),
+                             persistent=False)
 
     def forward(self, query: torch.Tensor, pos: torch.Tensor, value: torch.Tensor,
                 ref: torch.Tensor) -> torch.Tensor:
@@ -78,8 +80,7 @@ class CustomMSDeformableAttention(nn.Module):
         v = self.value_proj(value).view(-1, nh, d // nh)
         off = self.sampling_offsets(q).view(n, nh, npt, 2)
         attn = self.attention_weights(q).view(n, nh, npt).softmax(-1)
-        norm = torch.tensor([self.bev_w, self.bev_h], dtype=torch.float32)
-        loc = ref.view(n, 1, 1, 2) + off / norm
+        loc = ref.view(n, 1, 1, 2) + off / self.offset_norm
         out = bilinear_gather_sum(v, loc, attn, self.bev_h, self.bev_w)
         return query + self.output_proj(out)
 
