@@ -7,7 +7,11 @@
 //! pixels that point is `u = x / pack_gsd - 0.5`, `v = y / pack_gsd - 0.5` (pixel centres at
 //! integers, `FORMAT.md`), and the value is the bilinear blend of the four pack pixels around
 //! `(u, v)`, rounded half up. A crop pixel is *covered* when all four pack pixels lie in verified
-//! tiles; otherwise it is [`FILL_RGB`]. Bilinear sampling does not low-pass: a crop much coarser
+//! tiles; otherwise it is [`FILL_RGB`].
+//!
+//! Arithmetic: each row's first sample position is computed in f64, then stepped along the row
+//! in 32.32 fixed point; blend weights are quantised to 1/65536 px and the blend is integer, so
+//! the result is bit-identical on every target (no float rounding-mode or FMA dependence). Bilinear sampling does not low-pass: a crop much coarser
 //! than the pack aliases, so build packs at the crop's ground sampling distance.
 
 use glam::DVec2;
@@ -98,32 +102,80 @@ enum Slot<'a> {
 }
 
 /// The pack tiles under one crop, resolved and verified once per step so the pixel loop only
-/// indexes an array.
+/// indexes an array. Pixel coordinates inside are relative to the window's south-west corner.
 struct TileWindow<'a> {
     slots: [Slot<'a>; MAX_CROP_TILES],
-    tile_x0: i64,
-    tile_y0: i64,
     cols: i64,
     rows: i64,
+    /// log2 of the tile side (the format requires a power of two).
+    shift: u32,
     size_px: i64,
 }
 
 impl<'a> TileWindow<'a> {
     #[inline]
-    fn texel(&self, tx: i64, ty: i64, lx: i64, ly: i64) -> Result<&'a [u8], Slot<'a>> {
-        let (col, row) = (tx - self.tile_x0, ty - self.tile_y0);
-        if col < 0 || row < 0 || col >= self.cols || row >= self.rows {
-            return Err(Slot::Missing);
+    fn slot(&self, x: i64, y: i64) -> Slot<'a> {
+        let (col, row) = (x >> self.shift, y >> self.shift);
+        if x < 0 || y < 0 || col >= self.cols || row >= self.rows {
+            return Slot::Missing;
         }
-        match self.slots.get((row * self.cols + col) as usize) {
-            Some(Slot::Ready(px)) => {
-                let off = ((ly * self.size_px + lx) as usize) * CHANNELS;
+        self.slots
+            .get((row * self.cols + col) as usize)
+            .copied()
+            .unwrap_or(Slot::Missing)
+    }
+
+    #[inline]
+    fn texel(&self, x: i64, y: i64) -> Result<&'a [u8], Slot<'a>> {
+        match self.slot(x, y) {
+            Slot::Ready(px) => {
+                let mask = self.size_px - 1;
+                let off = (((y & mask) * self.size_px + (x & mask)) as usize) * CHANNELS;
                 px.get(off..off + CHANNELS).ok_or(Slot::Missing)
             }
-            Some(other) => Err(*other),
-            None => Err(Slot::Missing),
+            other => Err(other),
         }
     }
+
+    /// Bilinear sample at window pixel `(x, y)` + `(fx, fy) / 65536`, or the slot that stopped
+    /// it.
+    #[inline]
+    fn bilinear(&self, x: i64, y: i64, fx: u64, fy: u64) -> Result<[u8; 3], Slot<'a>> {
+        let mask = self.size_px - 1;
+        let (lx, ly) = (x & mask, y & mask);
+        if lx < mask && ly < mask {
+            // All four neighbours in one tile: one lookup, one slice.
+            if let Slot::Ready(px) = self.slot(x, y) {
+                let row_bytes = self.size_px as usize * CHANNELS;
+                let off = ((ly * self.size_px + lx) as usize) * CHANNELS;
+                if let Some(q) = px.get(off..off + row_bytes + 2 * CHANNELS) {
+                    let (s0, n0) = (&q[..2 * CHANNELS], &q[row_bytes..]);
+                    return Ok(core::array::from_fn(|k| {
+                        blend(s0[k], s0[k + CHANNELS], n0[k], n0[k + CHANNELS], fx, fy)
+                    }));
+                }
+            }
+        }
+        let a = self.texel(x, y)?;
+        let b = self.texel(x + 1, y)?;
+        let c = self.texel(x, y + 1)?;
+        let d = self.texel(x + 1, y + 1)?;
+        Ok(core::array::from_fn(|k| {
+            let at = |t: &[u8]| t.get(k).copied().unwrap_or(0);
+            blend(at(a), at(b), at(c), at(d), fx, fy)
+        }))
+    }
+}
+
+/// Bilinear blend of south-west `a`, south-east `b`, north-west `c`, north-east `d` with
+/// weights `fx`, `fy` in 1/65536, rounded half up.
+#[inline]
+fn blend(a: u8, b: u8, c: u8, d: u8, fx: u64, fy: u64) -> u8 {
+    const ONE: u64 = 1 << 16;
+    let south = u64::from(a) * (ONE - fx) + u64::from(b) * fx;
+    let north = u64::from(c) * (ONE - fx) + u64::from(d) * fx;
+    // At most 255 * 2^32: the shift brings it back to [0, 255].
+    ((south * (ONE - fy) + north * fy + (1 << 31)) >> 32) as u8
 }
 
 /// The pack-backed satellite source: crop, coverage, tile cache and route-ahead prefetch.
@@ -262,8 +314,9 @@ impl<'a> PackSource<'a> {
             .iter()
             .fold(DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
         let size_px = i64::from(self.pack.header().tile_size_px);
-        // Tile indices are i32 in the pack; anything beyond is simply off the pack.
-        let limit_px = f64::from(i32::MAX) * size_px as f64;
+        // Fixed point needs |u|, |v| < 2^30 px: beyond that (over 1000 km at 1 mm/px) is off
+        // any pack this runtime reads, so the crop is all fill.
+        let limit_px = f64::from(1u32 << 30);
         if !(lo.abs().max_element() < limit_px && hi.abs().max_element() < limit_px) {
             fill(out);
             return Ok(());
@@ -280,10 +333,9 @@ impl<'a> PackSource<'a> {
         }
         let mut window = TileWindow {
             slots: [Slot::Missing; MAX_CROP_TILES],
-            tile_x0,
-            tile_y0,
             cols,
             rows,
+            shift: size_px.trailing_zeros(),
             size_px,
         };
         for (k, slot) in window.slots.iter_mut().take(tiles).enumerate() {
@@ -304,17 +356,29 @@ impl<'a> PackSource<'a> {
                 _ => Slot::Corrupt(key),
             };
         }
+        // Window-relative pack pixel coordinates in 32.32 fixed point.
+        const ONE: f64 = (1u64 << 32) as f64;
+        let origin = DVec2::new((tile_x0 * size_px) as f64, (tile_y0 * size_px) as f64);
+        let (du, dv) = ((dc.x * ONE) as i64, (dc.y * ONE) as i64);
         let mut covered = 0u32;
         let mut corrupt_seen = [false; MAX_CROP_TILES];
         let mut pixels = out.chunks_exact_mut(CHANNELS);
         for r in 0..h {
-            let row_start = p00 + dr * r as f64;
-            for c in 0..w {
+            let start = p00 + dr * r as f64 - origin;
+            let (mut u, mut v) = ((start.x * ONE) as i64, (start.y * ONE) as i64);
+            for _ in 0..w {
                 let Some(dst) = pixels.next() else {
                     return Ok(());
                 };
-                let p = row_start + dc * c as f64;
-                match bilinear(&window, p) {
+                // Arithmetic shift: floor for negative coordinates too.
+                let (x, y) = (u >> 32, v >> 32);
+                let (fx, fy) = (
+                    ((u as u64) & 0xFFFF_FFFF) >> 16,
+                    ((v as u64) & 0xFFFF_FFFF) >> 16,
+                );
+                u += du;
+                v += dv;
+                match window.bilinear(x, y, fx, fy) {
                     Ok(rgb) => {
                         dst.copy_from_slice(&rgb);
                         covered += 1;
@@ -457,40 +521,6 @@ impl SatelliteSource for PackSource<'_> {
     fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage {
         self.crop_with_report(pose, spec, out).coverage
     }
-}
-
-/// Bilinear sample at pack-pixel coordinates `p`, or the slot that stopped it.
-#[inline]
-fn bilinear<'a>(window: &TileWindow<'a>, p: DVec2) -> Result<[u8; 3], Slot<'a>> {
-    let (uf, vf) = (libm::floor(p.x), libm::floor(p.y));
-    let (fx, fy) = ((p.x - uf) as f32, (p.y - vf) as f32);
-    let s = window.size_px;
-    let (x0, y0) = (uf as i64, vf as i64);
-    let (tx0, lx0) = (x0.div_euclid(s), x0.rem_euclid(s));
-    let (ty0, ly0) = (y0.div_euclid(s), y0.rem_euclid(s));
-    let (tx1, lx1) = if lx0 + 1 == s {
-        (tx0 + 1, 0)
-    } else {
-        (tx0, lx0 + 1)
-    };
-    let (ty1, ly1) = if ly0 + 1 == s {
-        (ty0 + 1, 0)
-    } else {
-        (ty0, ly0 + 1)
-    };
-    let a = window.texel(tx0, ty0, lx0, ly0)?;
-    let b = window.texel(tx1, ty0, lx1, ly0)?;
-    let c = window.texel(tx0, ty1, lx0, ly1)?;
-    let d = window.texel(tx1, ty1, lx1, ly1)?;
-    let mut rgb = [0u8; 3];
-    for (k, dst) in rgb.iter_mut().enumerate() {
-        let at = |t: &[u8]| f32::from(t.get(k).copied().unwrap_or(0));
-        let south = at(a) + (at(b) - at(a)) * fx;
-        let north = at(c) + (at(d) - at(c)) * fx;
-        // `as u8` saturates; values are within [0, 255] anyway.
-        *dst = (south + (north - south) * fy + 0.5) as u8;
-    }
-    Ok(rgb)
 }
 
 fn fill(out: &mut [u8]) {

@@ -21,7 +21,7 @@ pub const ROUTE_POINT_LEN: usize = 16;
 pub const INDEX_ENTRY_LEN: usize = 16;
 /// Colour channels per pixel (RGB).
 pub const CHANNELS: usize = 3;
-/// Smallest accepted tile side, pixels.
+/// Smallest accepted tile side, pixels (sides are powers of two).
 pub const MIN_TILE_SIZE_PX: u16 = 8;
 /// Largest accepted tile side, pixels.
 pub const MAX_TILE_SIZE_PX: u16 = 1024;
@@ -203,7 +203,9 @@ impl PackHeader {
     /// Check every field rule of `FORMAT.md`.
     pub(crate) fn validate(&self) -> Result<(), PackError> {
         let bad = |field| Err(PackError::BadField { field });
-        if !(MIN_TILE_SIZE_PX..=MAX_TILE_SIZE_PX).contains(&self.tile_size_px) {
+        if !(MIN_TILE_SIZE_PX..=MAX_TILE_SIZE_PX).contains(&self.tile_size_px)
+            || !self.tile_size_px.is_power_of_two()
+        {
             return bad("tile_size_px");
         }
         if !self.origin.lat_deg.is_finite() || !(-90.0..=90.0).contains(&self.origin.lat_deg) {
