@@ -1,0 +1,91 @@
+//! `satmap-sim build-pack`: build a route pack from slippy-map tiles (or one georeferenced
+//! image) and a GeoJSON route, and write it to a file.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::route_pack_builder::{
+    BuildOptions, Imagery, SlippyTiles, WorldCrs, WorldFileImage, build_pack, read_route_geojson,
+};
+
+/// Arguments of `build-pack`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Route: GeoJSON LineString in WGS84 (bare geometry, Feature or FeatureCollection).
+    #[arg(long)]
+    pub route: PathBuf,
+    /// Folder of slippy-map tiles `z/x/y.png|jpg` (Web Mercator).
+    #[arg(long, conflicts_with = "image", required_unless_present = "image")]
+    pub tiles: Option<PathBuf>,
+    /// Zoom level to read from `--tiles` (default: the highest present).
+    #[arg(long, requires = "tiles")]
+    pub zoom: Option<u8>,
+    /// One georeferenced image (PNG or JPEG) with a world file.
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    /// World file of `--image` (default: next to it, `.pgw`/`.pngw`/`.jgw`/`.jpgw`/`.wld`).
+    #[arg(long, requires = "image")]
+    pub world_file: Option<PathBuf>,
+    /// Coordinate system of the world file.
+    #[arg(long, value_enum, default_value_t = WorldCrs::WebMercator, requires = "image")]
+    pub world_crs: WorldCrs,
+    /// Output pack file.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Corridor width around the route to cover, metres.
+    #[arg(long, default_value_t = 60.0)]
+    pub corridor_m: f64,
+    /// Ground sampling distance of the pack, metres per pixel.
+    #[arg(long, default_value_t = 0.15)]
+    pub gsd_m: f64,
+    /// Pack tile side, pixels (power of two).
+    #[arg(long, default_value_t = 256)]
+    pub tile_px: u16,
+    /// Leave out pack tiles without imagery instead of failing.
+    #[arg(long)]
+    pub allow_missing: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Build the pack and write it; prints a one-line summary.
+///
+/// # Errors
+/// Any [`crate::route_pack_builder::BuildError`], or the output cannot be written.
+pub fn run(args: &Args) -> Result<()> {
+    let route = read_route_geojson(&args.route)?;
+    let mut imagery: Box<dyn Imagery> = match (&args.tiles, &args.image) {
+        (Some(dir), _) => Box::new(SlippyTiles::open(dir, args.zoom)?),
+        (None, Some(image)) => Box::new(WorldFileImage::open(
+            image,
+            args.world_file.as_deref(),
+            args.world_crs,
+        )?),
+        (None, None) => anyhow::bail!("give --tiles DIR or --image FILE"),
+    };
+    let opts = BuildOptions {
+        corridor_width_m: args.corridor_m,
+        gsd_m: args.gsd_m,
+        tile_size_px: args.tile_px,
+        allow_missing: args.allow_missing,
+        show_progress: !args.quiet,
+    };
+    let started = std::time::Instant::now();
+    let built = build_pack(imagery.as_mut(), &route, &opts)?;
+    std::fs::write(&args.out, &built.bytes)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "{}: {} tiles ({} skipped), {:.1} MB, route {:.2} km, origin {:.7}, {:.7}, built in {:.1} s",
+        args.out.display(),
+        built.tiles,
+        built.skipped_tiles,
+        built.bytes.len() as f64 / 1e6,
+        built.route_length_m / 1000.0,
+        built.origin.lat_deg,
+        built.origin.lon_deg,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

@@ -1,0 +1,113 @@
+//! Errors of the route-pack builder, each with the input it concerns.
+
+use std::path::PathBuf;
+
+/// Why a pack could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// A file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The route file is not GeoJSON.
+    #[error("route {path} is not valid GeoJSON: {source}")]
+    RouteGeoJson {
+        /// The route file.
+        path: PathBuf,
+        /// The parser's message.
+        source: Box<geojson::Error>,
+    },
+    /// The GeoJSON holds no usable LineString.
+    #[error("route {path}: {reason}")]
+    RouteShape {
+        /// The route file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// An image could not be decoded.
+    #[error("unreadable image {path}: {source}")]
+    UnreadableImage {
+        /// The image.
+        path: PathBuf,
+        /// The decoder's error.
+        source: image::ImageError,
+    },
+    /// A slippy-map tile is not square, or not the size of the others.
+    #[error("tile {path} is {width}x{height} px, expected {expected}x{expected}")]
+    TileSize {
+        /// The tile.
+        path: PathBuf,
+        /// Its width.
+        width: u32,
+        /// Its height.
+        height: u32,
+        /// The size of the first tile read.
+        expected: u32,
+    },
+    /// The tile folder has no zoom level (numeric sub-folder) or not the one asked for.
+    #[error("tile folder {dir}: {reason}")]
+    TileFolder {
+        /// The folder.
+        dir: PathBuf,
+        /// What is missing.
+        reason: String,
+    },
+    /// A tile under the corridor is not in the folder.
+    #[error("missing tile {zoom}/{x}/{y} (.png or .jpg) in {dir}: the corridor needs it")]
+    MissingTile {
+        /// Tile folder.
+        dir: PathBuf,
+        /// Zoom level.
+        zoom: u8,
+        /// Column.
+        x: u32,
+        /// Row.
+        y: u32,
+    },
+    /// Part of the corridor lies outside the georeferenced image.
+    #[error("the corridor leaves the image {path} near lat {lat_deg:.7}, lon {lon_deg:.7}")]
+    OutsideImage {
+        /// The image.
+        path: PathBuf,
+        /// Where, latitude (degrees).
+        lat_deg: f64,
+        /// Where, longitude (degrees).
+        lon_deg: f64,
+    },
+    /// A route vertex has no imagery under it.
+    #[error(
+        "route point {index} (lat {lat_deg:.7}, lon {lon_deg:.7}) is outside the imagery: {detail}"
+    )]
+    RouteOutsideImagery {
+        /// Vertex number in the LineString.
+        index: usize,
+        /// Latitude, degrees.
+        lat_deg: f64,
+        /// Longitude, degrees.
+        lon_deg: f64,
+        /// Which tile or image was looked for.
+        detail: String,
+    },
+    /// The world file does not hold six numbers or its affine map is singular.
+    #[error("world file {path}: {reason}")]
+    WorldFile {
+        /// The world file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An option is out of range.
+    #[error("invalid option: {0}")]
+    Option(String),
+    /// Every pack tile was skipped for missing imagery.
+    #[error("no pack tile has imagery: nothing to write")]
+    Empty,
+    /// The runtime's encoder rejected the pack.
+    #[error("pack encoding failed: {0}")]
+    Encode(#[from] satmap_runtime::route_pack::PackError),
+}

@@ -1,0 +1,346 @@
+//! The route-pack builder end to end: slippy tiles and a world-file image drawn from a known
+//! pattern in the route frame, packed, then cropped by the runtime: a marker lands where the
+//! geodesy says, the pattern survives resampling, and bad inputs give the right error.
+
+use std::f64::consts::TAU;
+use std::path::{Path, PathBuf};
+
+use glam::{DVec2, DVec3};
+use image::RgbImage;
+use satmap_runtime::geo::web_mercator::{lat_lon_to_world_px, world_px_to_lat_lon};
+use satmap_runtime::geo::{EnuFrame, Geodetic, TileId, WorldPixel};
+use satmap_runtime::pose::EgoPose;
+use satmap_runtime::route_pack::{PackSource, RoutePack};
+use satmap_runtime::satellite::{Coverage, CropSpec};
+use satmap_sim::route_pack_builder::{
+    BuildError, BuildOptions, SlippyTiles, WorldCrs, WorldFileImage, build_pack,
+    parse_route_geojson,
+};
+
+const ORIGIN: Geodetic = Geodetic::new(42.336, -71.057, 0.0);
+const ZOOM: u8 = 19;
+const MARKER_M: DVec2 = DVec2::new(30.0, 5.0);
+
+/// The ground truth, in the route frame (ENU at `ORIGIN`): a 0.75 m red disc at `MARKER_M`,
+/// green and blue sinusoids of 10 m period along x and y.
+fn world(p: DVec2) -> [u8; 3] {
+    let red = if p.distance(MARKER_M) <= 0.75 { 255 } else { 0 };
+    let wave = |v: f64| (128.0 + 100.0 * (TAU * v / 10.0).sin()).round() as u8;
+    [red, wave(p.x), wave(p.y)]
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("satmap_route_pack_{}_{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn route_geojson(points_m: &[DVec2]) -> String {
+    let frame = EnuFrame::new(ORIGIN);
+    let coords: Vec<String> = points_m
+        .iter()
+        .map(|p| {
+            let g = frame.enu_to_geodetic(DVec3::new(p.x, p.y, 0.0));
+            format!("[{:.10}, {:.10}]", g.lon_deg, g.lat_deg)
+        })
+        .collect();
+    format!(
+        r#"{{"type": "Feature", "properties": {{}}, "geometry": {{"type": "LineString", "coordinates": [{}]}}}}"#,
+        coords.join(", ")
+    )
+}
+
+fn route(points_m: &[DVec2]) -> Vec<Geodetic> {
+    parse_route_geojson(&route_geojson(points_m), Path::new("test.geojson")).unwrap()
+}
+
+/// Write zoom-`zoom` tiles covering route-frame box `lo..hi`, each pixel painted with `world`
+/// at its centre.
+fn write_tiles(dir: &Path, zoom: u8, lo: DVec2, hi: DVec2) {
+    let frame = EnuFrame::new(ORIGIN);
+    let corner = |p: DVec2| frame.enu_to_geodetic(DVec3::new(p.x, p.y, 0.0));
+    let (sw, ne) = (corner(lo), corner(hi));
+    let t0 = TileId::from_lat_lon(ne.lat_deg, sw.lon_deg, zoom).unwrap();
+    let t1 = TileId::from_lat_lon(sw.lat_deg, ne.lon_deg, zoom).unwrap();
+    for tx in t0.x..=t1.x {
+        for ty in t0.y..=t1.y {
+            let img = RgbImage::from_fn(256, 256, |c, r| {
+                let w = WorldPixel {
+                    x_px: f64::from(tx * 256 + c) + 0.5,
+                    y_px: f64::from(ty * 256 + r) + 0.5,
+                };
+                let (lat, lon) = world_px_to_lat_lon(w, zoom);
+                let enu = frame.geodetic_to_enu(&Geodetic::new(lat, lon, 0.0));
+                image::Rgb(world(enu.truncate()))
+            });
+            let col = dir.join(zoom.to_string()).join(tx.to_string());
+            std::fs::create_dir_all(&col).unwrap();
+            img.save(col.join(format!("{ty}.png"))).unwrap();
+        }
+    }
+}
+
+fn opts() -> BuildOptions {
+    BuildOptions {
+        corridor_width_m: 20.0,
+        gsd_m: 0.25,
+        tile_size_px: 64,
+        ..BuildOptions::default()
+    }
+}
+
+/// Crop around the marker at an oblique yaw; check the marker centroid and the sinusoids.
+fn check_pack(bytes: &[u8]) {
+    let mut source = PackSource::from_bytes(bytes).unwrap();
+    let spec = CropSpec {
+        height_px: 80,
+        width_px: 80,
+        gsd_m: 0.25,
+        x_min_m: -10.0,
+        y_min_m: -10.0,
+    };
+    let pose = EgoPose::new(MARKER_M, 0.4);
+    let mut out = vec![0u8; 80 * 80 * 3];
+    let report = source.crop_with_report(&pose, &spec, &mut out);
+    assert_eq!(report.coverage, Coverage::Full);
+    let (mut sum, mut sr, mut sc) = (0.0, 0.0, 0.0);
+    let (mut err_g, mut err_b) = (0.0, 0.0);
+    for r in 0..80 {
+        for c in 0..80 {
+            let px = &out[(r * 80 + c) * 3..][..3];
+            let v = f64::from(px[0]);
+            sum += v;
+            sr += v * r as f64;
+            sc += v * c as f64;
+            let ego = DVec2::new(
+                -10.0 + (c as f64 + 0.5) * 0.25,
+                -10.0 + (r as f64 + 0.5) * 0.25,
+            );
+            let truth = world(pose.ego_to_route(ego));
+            err_g += (f64::from(px[1]) - f64::from(truth[1])).abs();
+            err_b += (f64::from(px[2]) - f64::from(truth[2])).abs();
+        }
+    }
+    // The marker is at the ego origin: crop pixel (39.5, 39.5); 0.15 px is 3.75 cm. The disc is
+    // aliased in the source tiles (painted at pixel centres), hence not 0.01 px.
+    assert!(sum > 0.0);
+    assert!((sr / sum - 39.5).abs() < 0.15, "row centroid {}", sr / sum);
+    assert!((sc / sum - 39.5).abs() < 0.15, "col centroid {}", sc / sum);
+    assert!(err_g / 6400.0 < 1.5, "green mean error {}", err_g / 6400.0);
+    assert!(err_b / 6400.0 < 1.5, "blue mean error {}", err_b / 6400.0);
+}
+
+#[test]
+fn slippy_tiles_pack_puts_the_marker_where_geodesy_says() {
+    let dir = scratch("slippy");
+    write_tiles(&dir, ZOOM, DVec2::new(-30.0, -30.0), DVec2::new(90.0, 40.0));
+    let path = [DVec2::ZERO, DVec2::new(30.0, 5.0), DVec2::new(60.0, 10.0)];
+    let mut tiles = SlippyTiles::open(&dir, None).unwrap();
+    assert_eq!((tiles.zoom(), tiles.tile_px()), (ZOOM, 256));
+    let built = build_pack(&mut tiles, &route(&path), &opts()).unwrap();
+    assert_eq!(built.skipped_tiles, 0);
+    assert!(
+        (built.route_length_m - (30.4138 + 30.4138)).abs() < 0.01,
+        "{}",
+        built.route_length_m
+    );
+    let pack = RoutePack::parse(&built.bytes).unwrap();
+    assert_eq!(pack.header().tile_size_px, 64);
+    assert!((pack.header().origin.lat_deg - ORIGIN.lat_deg).abs() < 1e-9);
+    // Route points survive in the route frame.
+    assert!(pack.route_point(1).unwrap().distance(path[1]) < 1e-3);
+    // The corridor (10 m either side) is covered along the whole route.
+    for k in 0..=60 {
+        let p = path[0].lerp(path[2], f64::from(k) / 60.0);
+        for off in [-9.0, 0.0, 9.0] {
+            let q = p + DVec2::new(0.0, off);
+            let key = satmap_runtime::route_pack::TileKey::new(
+                (q.x / 16.0).floor() as i32,
+                (q.y / 16.0).floor() as i32,
+            );
+            assert!(pack.find_tile(key).is_some(), "{q}");
+        }
+    }
+    check_pack(&built.bytes);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn world_file_image_pack_matches_the_slippy_one() {
+    let dir = scratch("world");
+    let frame = EnuFrame::new(ORIGIN);
+    // A north-up image in EPSG:3857 at zoom-19 resolution over the route area.
+    let nw = frame.enu_to_geodetic(DVec3::new(-30.0, 40.0, 0.0));
+    let w0 = lat_lon_to_world_px(nw.lat_deg, nw.lon_deg, ZOOM);
+    let merc_m_per_px =
+        2.0 * std::f64::consts::PI * 6_378_137.0 / (256.0 * f64::from(1u32 << ZOOM));
+    let (width, height) = (560u32, 340u32);
+    let img = RgbImage::from_fn(width, height, |c, r| {
+        let w = WorldPixel {
+            x_px: w0.x_px + f64::from(c) + 0.5,
+            y_px: w0.y_px + f64::from(r) + 0.5,
+        };
+        let (lat, lon) = world_px_to_lat_lon(w, ZOOM);
+        image::Rgb(world(
+            frame
+                .geodetic_to_enu(&Geodetic::new(lat, lon, 0.0))
+                .truncate(),
+        ))
+    });
+    img.save(dir.join("ortho.png")).unwrap();
+    let half_world_m = std::f64::consts::PI * 6_378_137.0;
+    let c_m = (w0.x_px + 0.5) * merc_m_per_px - half_world_m;
+    let f_m = half_world_m - (w0.y_px + 0.5) * merc_m_per_px;
+    std::fs::write(
+        dir.join("ortho.pgw"),
+        format!("{merc_m_per_px}\n0\n0\n{}\n{c_m}\n{f_m}\n", -merc_m_per_px),
+    )
+    .unwrap();
+    let mut image =
+        WorldFileImage::open(&dir.join("ortho.png"), None, WorldCrs::WebMercator).unwrap();
+    let path = [DVec2::ZERO, DVec2::new(30.0, 5.0), DVec2::new(60.0, 10.0)];
+    let built = build_pack(&mut image, &route(&path), &opts()).unwrap();
+    check_pack(&built.bytes);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn missing_tiles_route_outside_and_unreadable_images_are_clear_errors() {
+    // Zoom 21 (14 m tiles here) so the corridor spans tiles that hold no route vertex.
+    const Z: u8 = 21;
+    let dir = scratch("errors");
+    write_tiles(&dir, Z, DVec2::new(-15.0, -15.0), DVec2::new(75.0, 25.0));
+    let frame = EnuFrame::new(ORIGIN);
+    let tile_at = |p: DVec2| {
+        let g = frame.enu_to_geodetic(DVec3::new(p.x, p.y, 0.0));
+        TileId::from_lat_lon(g.lat_deg, g.lon_deg, Z).unwrap()
+    };
+    let ends = [DVec2::ZERO, DVec2::new(60.0, 10.0)];
+    let path = route(&ends);
+    // A route running 500 m east leaves the tiles at its second point.
+    let mut tiles = SlippyTiles::open(&dir, Some(Z)).unwrap();
+    let err = build_pack(
+        &mut tiles,
+        &route(&[DVec2::ZERO, DVec2::new(500.0, 0.0)]),
+        &opts(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(err, BuildError::RouteOutsideImagery { index: 1, .. }),
+        "{err}"
+    );
+    // Delete a tile mid-corridor (no vertex in it): a missing-tile error naming it.
+    let hole = tile_at(DVec2::new(30.0, 5.0));
+    assert!(ends.iter().all(|p| tile_at(*p) != hole));
+    std::fs::remove_file(dir.join(format!("{Z}/{}/{}.png", hole.x, hole.y))).unwrap();
+    let mut tiles = SlippyTiles::open(&dir, Some(Z)).unwrap();
+    let err = build_pack(&mut tiles, &path, &opts()).unwrap_err();
+    assert!(
+        matches!(&err, BuildError::MissingTile { zoom, x, y, .. } if (*zoom, *x, *y) == (Z, hole.x, hole.y)),
+        "{err}"
+    );
+    assert!(
+        err.to_string()
+            .contains(&format!("{Z}/{}/{}", hole.x, hole.y)),
+        "{err}"
+    );
+    // With allow_missing the pack tiles over the hole are left out and the rest is packed.
+    let lenient = BuildOptions {
+        allow_missing: true,
+        ..opts()
+    };
+    let mut tiles = SlippyTiles::open(&dir, Some(Z)).unwrap();
+    let built = build_pack(&mut tiles, &path, &lenient).unwrap();
+    assert!(
+        built.skipped_tiles > 0 && built.tiles > built.skipped_tiles,
+        "{built:?}"
+    );
+    RoutePack::parse(&built.bytes).unwrap();
+    // A corrupt PNG is an unreadable-image error naming the file.
+    let first = tile_at(DVec2::new(1.0, 0.0));
+    let bad = dir.join(format!("{Z}/{}/{}.png", first.x, first.y));
+    std::fs::write(&bad, b"not a png").unwrap();
+    let mut tiles = SlippyTiles::open(&dir, Some(Z)).unwrap_or_else(|e| panic!("{e}"));
+    let err = build_pack(&mut tiles, &path, &opts()).unwrap_err();
+    assert!(
+        matches!(&err, BuildError::UnreadableImage { path, .. } if *path == bad),
+        "{err}"
+    );
+    // A zoom level that is not there.
+    assert!(matches!(
+        SlippyTiles::open(&dir, Some(12)),
+        Err(BuildError::TileFolder { .. })
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn geojson_routes_in_their_usual_wrappings() {
+    let p = Path::new("r.geojson");
+    let line = r#"{"type": "LineString", "coordinates": [[-71.05, 42.33], [-71.04, 42.34, 12.0]]}"#;
+    let feature = format!(r#"{{"type": "Feature", "properties": null, "geometry": {line}}}"#);
+    let collection = format!(
+        r#"{{"type": "FeatureCollection", "features": [{{"type": "Feature", "properties": null, "geometry": {{"type": "Point", "coordinates": [0, 0]}}}}, {feature}]}}"#
+    );
+    for text in [line.to_string(), feature, collection] {
+        let r = parse_route_geojson(&text, p).unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!((r[1].lat_deg, r[1].lon_deg), (42.34, -71.04));
+    }
+    let one_point = r#"{"type": "LineString", "coordinates": [[-71.05, 42.33]]}"#;
+    assert!(matches!(
+        parse_route_geojson(one_point, p),
+        Err(BuildError::RouteShape { .. })
+    ));
+    let polygon = r#"{"type": "Point", "coordinates": [1, 2]}"#;
+    assert!(matches!(
+        parse_route_geojson(polygon, p),
+        Err(BuildError::RouteShape { .. })
+    ));
+    let swapped = r#"{"type": "LineString", "coordinates": [[42.33, -171.05], [42.34, -171.04]]}"#;
+    assert!(matches!(
+        parse_route_geojson(swapped, p),
+        Err(BuildError::RouteShape { .. })
+    ));
+    assert!(matches!(
+        parse_route_geojson("{", p),
+        Err(BuildError::RouteGeoJson { .. })
+    ));
+}
+
+#[test]
+fn build_pack_command_writes_a_loadable_pack() {
+    let dir = scratch("cli");
+    write_tiles(&dir, ZOOM, DVec2::new(-30.0, -30.0), DVec2::new(90.0, 40.0));
+    let route_path = dir.join("route.geojson");
+    std::fs::write(
+        &route_path,
+        route_geojson(&[DVec2::ZERO, DVec2::new(30.0, 5.0), DVec2::new(60.0, 10.0)]),
+    )
+    .unwrap();
+    let args = satmap_sim::cli::build_pack::Args {
+        route: route_path,
+        tiles: Some(dir.clone()),
+        zoom: None,
+        image: None,
+        world_file: None,
+        world_crs: WorldCrs::WebMercator,
+        out: dir.join("route.pack"),
+        corridor_m: 20.0,
+        gsd_m: 0.25,
+        tile_px: 64,
+        allow_missing: false,
+        quiet: true,
+    };
+    satmap_sim::cli::build_pack::run(&args).unwrap();
+    let bytes = std::fs::read(dir.join("route.pack")).unwrap();
+    check_pack(&bytes);
+    let bad = satmap_sim::cli::build_pack::Args {
+        tile_px: 100,
+        ..args
+    };
+    let err = satmap_sim::cli::build_pack::run(&bad).unwrap_err();
+    assert!(err.to_string().contains("power of two"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
