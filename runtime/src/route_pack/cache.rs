@@ -12,7 +12,7 @@ use super::crop::MAX_CROP_TILES;
 use super::format::RoutePack;
 
 /// Tile cache capacity, entries (one per tile; each entry is 16 bytes of state, the pixels stay
-/// in the pack image).
+/// in the pack image). `memory_layout.toml` (`region.tile_cache`) records the same 64 x 16 B.
 pub const TILE_CACHE_TILES: usize = 64;
 /// Most tiles a step verifies ahead of the vehicle, on top of the ones its crop needs.
 pub const PREFETCH_TILES_PER_STEP: usize = 2;
@@ -29,6 +29,9 @@ pub enum TileState {
     /// Checksum mismatch: never sample this tile.
     Corrupt,
 }
+
+// `memory_layout.toml` budgets 16 bytes per tile-cache entry.
+const _: () = assert!(core::mem::size_of::<Option<Entry>>() == 16);
 
 #[derive(Clone, Copy, Debug)]
 struct Entry {

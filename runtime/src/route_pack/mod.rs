@@ -10,6 +10,16 @@
 //! - [`cache`]: the fixed-capacity cache of verified tiles ([`TILE_CACHE_TILES`]).
 //! - [`crop`]: the ego-centred, yaw-rotated bilinear crop and [`PackSource`], the pack-backed
 //!   [`crate::satellite::SatelliteSource`], with route-ahead prefetch.
+//!
+//! Per-step work is bounded: at most [`MAX_CROP_TILES`] tiles hashed for the crop (only those
+//! not already verified in the cache) plus [`PREFETCH_TILES_PER_STEP`] ahead on the route; the
+//! pixel loop itself only indexes a per-step table of at most `MAX_CROP_TILES` tile slices.
+//!
+//! Measured (criterion, x86-64, 2 shared cores under load 3-4, so upper bounds): crop
+//! 400 x 200 at 0.15 m/px 1.2-1.4 ms, 200 x 100 at 0.3 m/px 0.32 ms (`cargo bench -p
+//! satmap-runtime --bench route_crop`); host build 0.55 s per km of route with a 60 m corridor
+//! at 0.15 m/px, 256 px tiles: 85 tiles, 16.7 MB per km raw RGB (`cargo bench -p satmap-sim
+//! --bench pack_build`).
 
 pub mod cache;
 pub mod crop;
