@@ -5,7 +5,14 @@
 //! factor. The arithmetic order of [`Calibration::lidar2img`] is fixed (see `ARCHITECTURE.md`) so
 //! that the Rust and Python look-up tables agree element for element.
 
+use core::fmt;
+
 use glam::{DMat3, DQuat, DVec3, Mat4, Vec4};
+
+#[cfg(feature = "std")]
+mod toml_file;
+#[cfg(feature = "std")]
+pub use toml_file::{CalibrationFileError, from_toml_file, from_toml_str};
 
 /// Number of cameras in the rig; the order is the camera index of the model.
 pub const NUM_CAMERAS: usize = 6;
@@ -49,21 +56,36 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// Check every camera: finite numbers, positive focal lengths, unit rotations (within 1e-6).
+    ///
+    /// # Errors
+    /// The first invalid camera (model index) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (usize, CalibrationFault)> {
+        for (i, c) in self.cameras.iter().enumerate() {
+            let finite = c.fx_px.is_finite()
+                && c.fy_px.is_finite()
+                && c.cx_px.is_finite()
+                && c.cy_px.is_finite()
+                && c.translation_m.is_finite()
+                && c.rotation.is_finite();
+            if !finite {
+                return Err((i, CalibrationFault::NonFinite));
+            }
+            if c.fx_px <= 0.0 || c.fy_px <= 0.0 {
+                return Err((i, CalibrationFault::NonPositiveFocal));
+            }
+            if (c.rotation.length() - 1.0).abs() >= 1e-6 {
+                return Err((i, CalibrationFault::NonUnitRotation));
+            }
+        }
+        Ok(())
+    }
+
     /// True when every number is finite, focal lengths are positive and rotations are unit
     /// quaternions (within 1e-6).
     #[must_use]
     pub fn is_valid(&self) -> bool {
-        self.cameras.iter().all(|c| {
-            c.fx_px.is_finite()
-                && c.fy_px.is_finite()
-                && c.fx_px > 0.0
-                && c.fy_px > 0.0
-                && c.cx_px.is_finite()
-                && c.cy_px.is_finite()
-                && c.translation_m.is_finite()
-                && c.rotation.is_finite()
-                && (c.rotation.length() - 1.0).abs() < 1e-6
-        })
+        self.validate().is_ok()
     }
 
     /// `lidar2img[c] = diag(s, s, 1, 1) @ K4 @ inverse(cam2ego)`, in f64, then cast to f32.
@@ -106,3 +128,27 @@ impl Calibration {
         })
     }
 }
+
+/// What is wrong with one camera of a [`Calibration`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum CalibrationFault {
+    /// An intrinsic, the translation or the rotation is NaN or infinite.
+    NonFinite,
+    /// A focal length is zero or negative.
+    NonPositiveFocal,
+    /// The rotation quaternion is not of unit length (within 1e-6).
+    NonUnitRotation,
+}
+
+impl fmt::Display for CalibrationFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::NonFinite => "a calibration value is not finite",
+            Self::NonPositiveFocal => "a focal length is not positive",
+            Self::NonUnitRotation => "the rotation quaternion is not of unit length",
+        })
+    }
+}
+
+impl core::error::Error for CalibrationFault {}

@@ -8,8 +8,35 @@
 
 extern crate alloc;
 
+mod buffers;
+#[cfg(feature = "std")]
+pub mod bundle;
 pub mod calibration;
+pub mod can_bus;
+pub mod capacity;
+pub mod decode;
+pub mod engine;
+#[cfg(feature = "tract")]
+pub mod engine_tract;
+pub mod error;
+pub mod frame;
 pub mod geo;
+pub mod gkt;
+pub mod map_frame;
+pub mod model_dims;
 pub mod pose;
 pub mod route_pack;
 pub mod satellite;
+pub mod step;
+#[cfg(test)]
+mod test_support;
+
+pub use calibration::Calibration;
+pub use engine::{Engine, EngineError, EngineErrorKind, Stage};
+pub use error::{InitError, StepError};
+pub use frame::{CameraImage, Frame};
+pub use map_frame::{Health, MapClass, MapElement, MapFrame, SatellitePrior};
+pub use model_dims::ModelDims;
+pub use pose::{EgoMotion, EgoPose};
+pub use satellite::{Coverage, CropSpec, SatelliteSource};
+pub use step::SatMap;

@@ -44,3 +44,32 @@ pub trait SatelliteSource {
     /// uncovered) and must not allocate.
     fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage;
 }
+
+/// A source that never has imagery: every step runs degraded (camera only).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NoSatellite;
+
+impl SatelliteSource for NoSatellite {
+    fn crop(&mut self, _pose: &EgoPose, _spec: &CropSpec, out: &mut [u8]) -> Coverage {
+        out.fill(0);
+        Coverage::None
+    }
+}
+
+/// A test source that returns the same crop every step, whatever the pose.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FixedCrop<'a>(pub &'a [u8]);
+
+impl SatelliteSource for FixedCrop<'_> {
+    /// Copies the crop and reports [`Coverage::Full`]; a crop of the wrong length is not used
+    /// (zeros, [`Coverage::Corrupt`]).
+    fn crop(&mut self, _pose: &EgoPose, _spec: &CropSpec, out: &mut [u8]) -> Coverage {
+        if self.0.len() == out.len() {
+            out.copy_from_slice(self.0);
+            Coverage::Full
+        } else {
+            out.fill(0);
+            Coverage::Corrupt
+        }
+    }
+}

@@ -1,0 +1,393 @@
+//! The GKT look-up table: for every (camera, BEV query, head, kernel point), the feature-map cell
+//! the kernel reads. Built from the calibration at init and rebuilt in place on recalibration.
+//!
+//! Storage is compact: per camera, the ids of the queries it takes part in (ascending) and, per
+//! such query, `4 * kernel_points` feature indices (head-major, then kernel point), plus per-query
+//! camera counts. Capacity is fixed at the worst case (every camera sees every query), so
+//! rebuilding never allocates. The dense form of `ARCHITECTURE.md` is available for comparison.
+//!
+//! Arithmetic follows the contract to the bit: cell centres in f64 then cast to f32; projections
+//! in f32 with the documented association and no FMA; round-half-to-even; clamping.
+
+use alloc::vec::Vec;
+
+use glam::Mat4;
+
+use crate::buffers::zeroed;
+use crate::calibration::{Calibration, NUM_CAMERAS};
+use crate::capacity::NUM_HEADS;
+use crate::error::InitError;
+use crate::model_dims::ModelDims;
+
+/// Depth below which a projected point is behind the camera (and the division guard).
+const MIN_DEPTH: f32 = 1e-5;
+
+/// Compact GKT look-up table over fixed-capacity storage.
+#[derive(Clone, Debug)]
+pub struct Lut {
+    dims: ModelDims,
+    lidar2img: [Mat4; NUM_CAMERAS],
+    /// `camera_start[c]..camera_start[c + 1]` are camera c's entries.
+    camera_start: [usize; NUM_CAMERAS + 1],
+    /// Query id of each entry.
+    queries: Vec<u16>,
+    /// `entry_len` feature indices per entry.
+    indices: Vec<u16>,
+    /// Participating cameras per query.
+    count: Vec<u8>,
+}
+
+/// The dense look-up table of `ARCHITECTURE.md` (`lut.safetensors`), for comparison in tests.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DenseLut {
+    /// `[6, Q]`: 1 where the camera takes part for the query.
+    pub mask: Vec<u8>,
+    /// `[Q]`: participating cameras.
+    pub count: Vec<i32>,
+    /// `[6, Q, 4, kernel_points]`: feature index, -1 where the camera does not take part.
+    pub index: Vec<i32>,
+    /// `[6, 4, 4]` row-major projection matrices.
+    pub lidar2img: Vec<f32>,
+}
+
+/// Projection of one ego point into camera `m`: `(valid, u, v)` in padded-image fractions.
+///
+/// `p_r = ((m[r,0]*x + m[r,1]*y) + m[r,2]*z) + m[r,3]`, each product and sum rounded to f32.
+#[must_use]
+pub fn project(m: &Mat4, x: f32, y: f32, z: f32, pad_w: f32, pad_h: f32) -> (bool, f32, f32) {
+    let row = |r: usize| {
+        let a = m.x_axis[r] * x;
+        let b = m.y_axis[r] * y;
+        let c = m.z_axis[r] * z;
+        ((a + b) + c) + m.w_axis[r]
+    };
+    let (p0, p1, p2) = (row(0), row(1), row(2));
+    let d = if p2 > MIN_DEPTH { p2 } else { MIN_DEPTH };
+    let u = (p0 / d) / pad_w;
+    let v = (p1 / d) / pad_h;
+    let valid = p2 > MIN_DEPTH && u > 0.0 && u < 1.0 && v > 0.0 && v < 1.0;
+    (valid, u, v)
+}
+
+/// `clamp(round_half_even(x), 0, n - 1)`; NaN maps to 0.
+fn cell(x: f32, n: usize) -> u16 {
+    let r = libm::roundevenf(x);
+    let hi = (n - 1) as f32;
+    // `as` saturates and maps NaN to 0; the clamp keeps the in-range values exact.
+    r.clamp(0.0, hi) as u16
+}
+
+impl Lut {
+    /// Allocate the fixed-capacity table for `dims` and build it from `calibration`.
+    ///
+    /// `dims` must have passed [`ModelDims::validate`].
+    ///
+    /// # Errors
+    /// [`InitError::InvalidCalibration`] for a bad camera, [`InitError::OutOfMemory`] when the
+    /// storage cannot be reserved.
+    pub fn new(dims: &ModelDims, calibration: &Calibration) -> Result<Self, InitError> {
+        let q = dims.num_queries();
+        let entry_len = NUM_HEADS * dims.kernel_points();
+        let mut lut = Self {
+            dims: dims.clone(),
+            lidar2img: [Mat4::ZERO; NUM_CAMERAS],
+            camera_start: [0; NUM_CAMERAS + 1],
+            queries: with_capacity(NUM_CAMERAS * q)?,
+            indices: with_capacity(NUM_CAMERAS * q * entry_len)?,
+            count: zeroed(q)?,
+        };
+        lut.rebuild(calibration)?;
+        Ok(lut)
+    }
+
+    /// Bytes of storage the table reserves for `dims` (its fixed capacity).
+    #[must_use]
+    pub const fn capacity_bytes(dims: &ModelDims) -> usize {
+        let q = dims.num_queries();
+        NUM_CAMERAS * q * 2 * (1 + NUM_HEADS * dims.kernel_points()) + q
+    }
+
+    /// Rebuild the table in place for a new calibration, without allocating.
+    ///
+    /// # Errors
+    /// [`InitError::InvalidCalibration`]; the table is unchanged in that case.
+    pub fn rebuild(&mut self, calibration: &Calibration) -> Result<(), InitError> {
+        calibration
+            .validate()
+            .map_err(|(camera, fault)| InitError::InvalidCalibration { camera, fault })?;
+        let d = &self.dims;
+        self.lidar2img = calibration.lidar2img(d.image_scale);
+        let entry_len = NUM_HEADS * d.kernel_points();
+        let (pad_w, pad_h) = (d.pad_w as f32, d.pad_h as f32);
+        let (feat_w, feat_h) = (d.feat_w as f32, d.feat_h as f32);
+        let [xmin, ymin, _, xmax, ymax, _] = d.pc_range_m.map(f64::from);
+        self.queries.clear();
+        self.indices.clear();
+        self.count.fill(0);
+        for (c, m) in self.lidar2img.iter().enumerate() {
+            self.camera_start[c] = self.queries.len();
+            for i in 0..d.bev_h {
+                let y = (ymin + ((i as f64 + 0.5) * (ymax - ymin)) / d.bev_h as f64) as f32;
+                for j in 0..d.bev_w {
+                    let x = (xmin + ((j as f64 + 0.5) * (xmax - xmin)) / d.bev_w as f64) as f32;
+                    let proj = d.gkt_heights_m.map(|z| project(m, x, y, z, pad_w, pad_h));
+                    if !proj.iter().any(|p| p.0) {
+                        continue;
+                    }
+                    let q = i * d.bev_w + j;
+                    // Capacity is the worst case (every camera, every query): these never grow.
+                    debug_assert!(self.queries.len() < self.queries.capacity());
+                    self.queries.push(q as u16);
+                    self.count[q] += 1;
+                    for &(_, u, v) in &proj {
+                        let (su, sv) = (u * feat_w, v * feat_h);
+                        for p in 0..d.kernel_points() {
+                            let (ix, iy) = (p / d.kernel_h, p % d.kernel_h);
+                            let dx = ix as f32 - (d.kernel_w / 2) as f32;
+                            let dy = iy as f32 - (d.kernel_h / 2) as f32;
+                            let col = cell(su + dx, d.feat_w);
+                            let row = cell(sv + dy, d.feat_h);
+                            self.indices.push(row * d.feat_w as u16 + col);
+                        }
+                    }
+                }
+            }
+        }
+        self.camera_start[NUM_CAMERAS] = self.queries.len();
+        debug_assert_eq!(self.indices.len(), self.queries.len() * entry_len);
+        Ok(())
+    }
+
+    /// The model dimensions the table was built for.
+    #[must_use]
+    pub const fn dims(&self) -> &ModelDims {
+        &self.dims
+    }
+
+    /// Projection matrices the table was built from (f32, as in the golden `lidar2img`).
+    #[must_use]
+    pub const fn lidar2img(&self) -> &[Mat4; NUM_CAMERAS] {
+        &self.lidar2img
+    }
+
+    /// Feature indices per entry: `4 * kernel_points`, head-major.
+    #[must_use]
+    pub const fn entry_len(&self) -> usize {
+        NUM_HEADS * self.dims.kernel_points()
+    }
+
+    /// Camera `camera`'s entries: ascending query ids and their feature indices
+    /// (`entry_len()` per query).
+    ///
+    /// # Panics
+    /// If `camera >= 6` (callers iterate `0..NUM_CAMERAS`).
+    #[must_use]
+    pub fn camera_entries(&self, camera: usize) -> (&[u16], &[u16]) {
+        let (a, b) = (self.camera_start[camera], self.camera_start[camera + 1]);
+        let n = self.entry_len();
+        (&self.queries[a..b], &self.indices[a * n..b * n])
+    }
+
+    /// Participating cameras per query, `[Q]`.
+    #[must_use]
+    pub fn count(&self) -> &[u8] {
+        &self.count
+    }
+
+    /// Total (camera, query) pairs in the table.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.queries.len()
+    }
+
+    /// True when no camera sees any query.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.queries.is_empty()
+    }
+
+    /// Expand to the dense form of `ARCHITECTURE.md` (allocates; for tests and tools).
+    #[must_use]
+    pub fn to_dense(&self) -> DenseLut {
+        let q = self.dims.num_queries();
+        let n = self.entry_len();
+        let mut mask = alloc::vec![0u8; NUM_CAMERAS * q];
+        let mut index = alloc::vec![-1i32; NUM_CAMERAS * q * n];
+        for c in 0..NUM_CAMERAS {
+            let (queries, indices) = self.camera_entries(c);
+            for (e, &qid) in queries.iter().enumerate() {
+                let qid = usize::from(qid);
+                mask[c * q + qid] = 1;
+                let dst = &mut index[(c * q + qid) * n..][..n];
+                for (d, &s) in dst.iter_mut().zip(&indices[e * n..][..n]) {
+                    *d = i32::from(s);
+                }
+            }
+        }
+        let count = self.count.iter().map(|&c| i32::from(c)).collect();
+        let mut lidar2img = Vec::with_capacity(NUM_CAMERAS * 16);
+        for m in &self.lidar2img {
+            // Row-major, as numpy stores [6, 4, 4].
+            lidar2img.extend_from_slice(&m.transpose().to_cols_array());
+        }
+        DenseLut {
+            mask,
+            count,
+            index,
+            lidar2img,
+        }
+    }
+}
+
+fn with_capacity<T>(len: usize) -> Result<Vec<T>, InitError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len)
+        .map_err(|_| InitError::OutOfMemory {
+            bytes: len * core::mem::size_of::<T>(),
+        })?;
+    Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DQuat, DVec3};
+
+    use super::*;
+    use crate::calibration::CameraCalibration;
+
+    /// A forward camera at the ego origin, 1 m up, looking along +y; the other five look
+    /// straight up (they see nothing of the ground grid at the GKT heights below 1 m... and are
+    /// checked by the generic invariants only).
+    fn simple_rig() -> Calibration {
+        // camera z (optical) -> ego +y, camera x -> ego +x, camera y (down) -> ego -z.
+        let forward = DQuat::from_mat3(&glam::DMat3::from_cols(DVec3::X, DVec3::NEG_Z, DVec3::Y));
+        let up = DQuat::from_mat3(&glam::DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::Z));
+        let cam = |rotation| CameraCalibration {
+            fx_px: 800.0,
+            fy_px: 800.0,
+            cx_px: 800.0,
+            cy_px: 450.0,
+            translation_m: DVec3::new(0.0, 0.0, 10.0),
+            rotation,
+        };
+        let mut cameras = [cam(up); NUM_CAMERAS];
+        cameras[0] = CameraCalibration {
+            translation_m: DVec3::new(0.0, 0.0, 1.0),
+            ..cam(forward)
+        };
+        Calibration {
+            raw_width_px: 1600,
+            raw_height_px: 900,
+            cameras,
+        }
+    }
+
+    #[test]
+    fn hand_computed_projection_of_the_forward_camera() {
+        let dims = ModelDims::test_config();
+        let cal = simple_rig();
+        let lut = Lut::new(&dims, &cal).unwrap();
+        // Query (i = 60, j = 20): x = -15 + 20.5 * 0.75 = 0.375, y = -30 + 60.5 * 0.75 = 15.375.
+        let (i, j) = (60usize, 20usize);
+        let q = i * dims.bev_w + j;
+        let (x, y) = (0.375f32, 15.375f32);
+        // Camera at z = 1 looking +y: depth = y, image x = 0.2*(800*x/y + 800), image y =
+        // 0.2*(800*(1-z)/y + 450).
+        let dense = lut.to_dense();
+        assert_eq!(dense.mask[q], 1);
+        for (k, &z) in dims.gkt_heights_m.iter().enumerate() {
+            let u = 0.2 * (800.0 * x / y + 800.0) / 320.0;
+            let v = 0.2 * (800.0 * (1.0 - z) / y + 450.0) / 192.0;
+            for p in 0..15 {
+                let (ix, iy) = ((p / 3) as f32, (p % 3) as f32);
+                let col = (u * 10.0 + ix - 2.0).round().clamp(0.0, 9.0) as i32;
+                let row = (v * 6.0 + iy - 1.0).round().clamp(0.0, 5.0) as i32;
+                assert_eq!(
+                    dense.index[(q * 4 + k) * 15 + p],
+                    row * 10 + col,
+                    "k {k} p {p}"
+                );
+            }
+        }
+        // Behind the camera (rear half of the grid): not seen by camera 0.
+        let q_rear = 10 * dims.bev_w + 20;
+        assert_eq!(dense.mask[q_rear], 0);
+        assert!(dense.index[q_rear * 60..][..60].iter().all(|&v| v == -1));
+    }
+
+    #[test]
+    fn project_matches_hand_arithmetic() {
+        let cal = simple_rig();
+        let m = cal.lidar2img(0.2)[0];
+        let (valid, u, v) = project(&m, 0.0, 10.0, 1.0, 320.0, 192.0);
+        assert!(valid);
+        assert!((u - 0.5).abs() < 1e-6);
+        assert!((v - 90.0 / 192.0).abs() < 1e-6);
+        // Behind: invalid, but finite (the guard divides by 1e-5).
+        let (valid, u, _) = project(&m, 1.0, -10.0, 0.0, 320.0, 192.0);
+        assert!(!valid && u.is_finite());
+    }
+
+    #[test]
+    fn invariants_on_the_nuscenes_like_rig() {
+        let cal = crate::test_support::nuscenes_like();
+        for dims in [ModelDims::test_config(), ModelDims::paper_config()] {
+            let lut = Lut::new(&dims, &cal).unwrap();
+            let dense = lut.to_dense();
+            let q = dims.num_queries();
+            for qi in 0..q {
+                let m: i32 = (0..6).map(|c| i32::from(dense.mask[c * q + qi])).sum();
+                assert_eq!(m, dense.count[qi]);
+            }
+            assert!(
+                dense
+                    .index
+                    .iter()
+                    .all(|&v| v >= -1 && v < dims.num_features() as i32)
+            );
+            // A surround rig sees most of the 60 m x 30 m area (the car body hides the middle).
+            let seen = dense.count.iter().filter(|&&c| c > 0).count();
+            assert!(seen > q * 8 / 10, "seen {seen} of {q}");
+            // Overlap exists, but cameras mostly see disjoint regions.
+            assert!(
+                lut.len() > seen && lut.len() < 2 * q,
+                "entries {}",
+                lut.len()
+            );
+            // Row-major lidar2img matches the calibration.
+            let l2i = cal.lidar2img(dims.image_scale);
+            assert_eq!(dense.lidar2img[4 * 0 + 3], l2i[0].w_axis.x);
+        }
+    }
+
+    #[test]
+    fn round_half_even_and_clamp() {
+        assert_eq!(cell(2.5, 10), 2);
+        assert_eq!(cell(3.5, 10), 4);
+        assert_eq!(cell(-0.5, 10), 0);
+        assert_eq!(cell(-3.0, 10), 0);
+        assert_eq!(cell(9.5, 10), 9);
+        assert_eq!(cell(1e30, 10), 9);
+        assert_eq!(cell(f32::NAN, 10), 0);
+    }
+
+    #[test]
+    fn rebuild_reuses_storage_and_matches_fresh_build() {
+        let dims = ModelDims::test_config();
+        let rig = crate::test_support::nuscenes_like();
+        let mut lut = Lut::new(&dims, &simple_rig()).unwrap();
+        let (qp, ip) = (lut.queries.as_ptr(), lut.indices.as_ptr());
+        lut.rebuild(&rig).unwrap();
+        assert_eq!((qp, ip), (lut.queries.as_ptr(), lut.indices.as_ptr()));
+        assert_eq!(lut.to_dense(), Lut::new(&dims, &rig).unwrap().to_dense());
+        // A rejected calibration leaves the table as it was.
+        let mut bad = rig;
+        bad.cameras[2].fx_px = f64::NAN;
+        let before = lut.to_dense();
+        assert!(matches!(
+            lut.rebuild(&bad),
+            Err(InitError::InvalidCalibration { camera: 2, .. })
+        ));
+        assert_eq!(lut.to_dense(), before);
+    }
+}

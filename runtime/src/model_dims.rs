@@ -1,0 +1,607 @@
+//! Model dimensions: the `[model]` table of a bundle manifest, checked once at init, and the
+//! buffer sizes derived from it.
+//!
+//! Frames: `pc_range_m` is `[xmin, ymin, zmin, xmax, ymax, zmax]` in the ego frame (x right,
+//! y forward, z up). The BEV grid has `bev_h` rows along y (row 0 at the rear) and `bev_w` columns
+//! along x (column 0 at the left).
+
+use core::fmt;
+
+use crate::calibration::CAMERA_NAMES;
+use crate::capacity::{
+    MAX_CAMERAS, MAX_FEATURES, MAX_KERNEL_POINTS, MAX_QUERIES, MAX_TOP_K, NUM_CLASSES, NUM_HEADS,
+    NUM_POINTS,
+};
+use crate::satellite::CropSpec;
+
+/// Class names in head order, as the manifest spells them.
+pub const CLASS_NAMES: [&str; NUM_CLASSES] = ["divider", "ped_crossing", "boundary"];
+
+/// Shapes and geometry of one exported model configuration (`test`, `nano`, `paper`).
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "std", derive(serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(try_from = "manifest_table::ModelTable"))]
+pub struct ModelDims {
+    /// Channels of every feature and BEV tensor (`D`).
+    pub embed_dims: usize,
+    /// BEV rows (along ego y).
+    pub bev_h: usize,
+    /// BEV columns (along ego x).
+    pub bev_w: usize,
+    /// Perception range `[xmin, ymin, zmin, xmax, ymax, zmax]`, ego metres.
+    pub pc_range_m: [f32; 6],
+    /// Instance queries of the map decoder.
+    pub num_vec: usize,
+    /// Points per instance.
+    pub num_pts: usize,
+    /// Elements kept by decode.
+    pub top_k: usize,
+    /// Resized (unpadded) camera image height, pixels.
+    pub image_h: usize,
+    /// Resized (unpadded) camera image width, pixels.
+    pub image_w: usize,
+    /// Padded image height the encoder sees, pixels.
+    pub pad_h: usize,
+    /// Padded image width the encoder sees, pixels.
+    pub pad_w: usize,
+    /// Resize factor from the raw calibration size to `image_w x image_h`.
+    pub image_scale: f64,
+    /// Feature-map rows of one camera.
+    pub feat_h: usize,
+    /// Feature-map columns of one camera.
+    pub feat_w: usize,
+    /// GKT reference heights (one per head), ego z metres.
+    pub gkt_heights_m: [f32; NUM_HEADS],
+    /// GKT kernel rows.
+    pub kernel_h: usize,
+    /// GKT kernel columns.
+    pub kernel_w: usize,
+    /// Satellite crop rows (along ego y).
+    pub sat_h: usize,
+    /// Satellite crop columns (along ego x).
+    pub sat_w: usize,
+    /// Satellite crop ground sampling distance, metres per pixel.
+    pub sat_gsd_m: f64,
+}
+
+/// Why a [`ModelDims`] cannot run on this runtime.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum DimsError {
+    /// A size that must be positive is zero.
+    Zero {
+        /// Field name.
+        field: &'static str,
+    },
+    /// A number is NaN or infinite.
+    NonFinite {
+        /// Field name.
+        field: &'static str,
+    },
+    /// `embed_dims` does not split into the GKT heads.
+    EmbedDimsNotDivisibleByHeads {
+        /// The configured channels.
+        embed_dims: usize,
+        /// Heads the channels must split into.
+        heads: usize,
+    },
+    /// More BEV queries than the look-up table can address.
+    TooManyQueries {
+        /// `bev_h * bev_w`.
+        queries: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// A feature map larger than the look-up table can address.
+    TooManyFeatures {
+        /// `feat_h * feat_w`.
+        features: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// The GKT kernel is larger than the weights buffer allows.
+    KernelTooLarge {
+        /// `kernel_h * kernel_w`.
+        points: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// Points per instance differ from the fixed polyline length.
+    PointsMismatch {
+        /// Configured points.
+        num_pts: usize,
+        /// Fixed capacity.
+        expected: usize,
+    },
+    /// `top_k` is larger than the output capacity or than `num_vec * classes`.
+    TopKTooLarge {
+        /// Configured top-k.
+        top_k: usize,
+        /// Largest allowed value.
+        max: usize,
+    },
+    /// The padded image is smaller than the image.
+    PaddingSmallerThanImage {
+        /// True for the height, false for the width.
+        height: bool,
+    },
+    /// `pc_range_m` has `min >= max` on an axis (0 = x, 1 = y, 2 = z).
+    EmptyRange {
+        /// Axis index.
+        axis: u8,
+    },
+    /// A positive quantity (scale, ground sampling distance) is not positive.
+    NotPositive {
+        /// Field name.
+        field: &'static str,
+    },
+}
+
+impl fmt::Display for DimsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Zero { field } => write!(f, "model dimension `{field}` is zero"),
+            Self::NonFinite { field } => write!(f, "model field `{field}` is not finite"),
+            Self::EmbedDimsNotDivisibleByHeads { embed_dims, heads } => {
+                write!(
+                    f,
+                    "embed_dims {embed_dims} is not divisible by {heads} GKT heads"
+                )
+            }
+            Self::TooManyQueries { queries, max } => {
+                write!(
+                    f,
+                    "{queries} BEV queries exceed the look-up table capacity {max}"
+                )
+            }
+            Self::TooManyFeatures { features, max } => {
+                write!(
+                    f,
+                    "{features} feature cells exceed the look-up table capacity {max}"
+                )
+            }
+            Self::KernelTooLarge { points, max } => {
+                write!(
+                    f,
+                    "GKT kernel of {points} points exceeds the capacity {max}"
+                )
+            }
+            Self::PointsMismatch { num_pts, expected } => {
+                write!(
+                    f,
+                    "num_pts {num_pts} differs from the fixed polyline length {expected}"
+                )
+            }
+            Self::TopKTooLarge { top_k, max } => write!(f, "top_k {top_k} exceeds {max}"),
+            Self::PaddingSmallerThanImage { height: true } => {
+                write!(f, "pad_h is smaller than image_h")
+            }
+            Self::PaddingSmallerThanImage { height: false } => {
+                write!(f, "pad_w is smaller than image_w")
+            }
+            Self::EmptyRange { axis } => {
+                write!(f, "pc_range_m axis {axis} has min >= max")
+            }
+            Self::NotPositive { field } => write!(f, "model field `{field}` must be positive"),
+        }
+    }
+}
+
+impl core::error::Error for DimsError {}
+
+impl ModelDims {
+    /// BEV queries, `bev_h * bev_w` (`Q`).
+    #[must_use]
+    pub const fn num_queries(&self) -> usize {
+        self.bev_h * self.bev_w
+    }
+
+    /// Feature cells of one camera, `feat_h * feat_w` (`F`).
+    #[must_use]
+    pub const fn num_features(&self) -> usize {
+        self.feat_h * self.feat_w
+    }
+
+    /// f32 values of one camera's value features, `F * D`.
+    #[must_use]
+    pub const fn value_len(&self) -> usize {
+        self.num_features() * self.embed_dims
+    }
+
+    /// Channels per GKT head, `D / 4`.
+    #[must_use]
+    pub const fn head_dims(&self) -> usize {
+        self.embed_dims / NUM_HEADS
+    }
+
+    /// GKT kernel points, `kernel_h * kernel_w`.
+    #[must_use]
+    pub const fn kernel_points(&self) -> usize {
+        self.kernel_h * self.kernel_w
+    }
+
+    /// f32 values of the GKT weights, `Q * 4 * kernel_points`.
+    #[must_use]
+    pub const fn weights_len(&self) -> usize {
+        self.num_queries() * NUM_HEADS * self.kernel_points()
+    }
+
+    /// f32 values of one `[Q, D]` / `[bev_h, bev_w, D]` tensor.
+    #[must_use]
+    pub const fn bev_len(&self) -> usize {
+        self.num_queries() * self.embed_dims
+    }
+
+    /// Bytes of one camera image, `image_h * image_w * 3`.
+    #[must_use]
+    pub const fn image_bytes(&self) -> usize {
+        self.image_h * self.image_w * 3
+    }
+
+    /// Bytes of the satellite crop, `sat_h * sat_w * 3`.
+    #[must_use]
+    pub const fn crop_bytes(&self) -> usize {
+        self.sat_h * self.sat_w * 3
+    }
+
+    /// f32 values of the class logits, `num_vec * 3`.
+    #[must_use]
+    pub const fn logits_len(&self) -> usize {
+        self.num_vec * NUM_CLASSES
+    }
+
+    /// f32 values of the normalised points, `num_vec * num_pts * 2`.
+    #[must_use]
+    pub const fn points_len(&self) -> usize {
+        self.num_vec * self.num_pts * 2
+    }
+
+    /// Geometry of the satellite crop: the BEV range sampled at `sat_gsd_m`, ego-centred.
+    #[must_use]
+    pub fn crop_spec(&self) -> CropSpec {
+        CropSpec {
+            height_px: self.sat_h,
+            width_px: self.sat_w,
+            gsd_m: self.sat_gsd_m,
+            x_min_m: f64::from(self.pc_range_m[0]),
+            y_min_m: f64::from(self.pc_range_m[1]),
+        }
+    }
+
+    /// Check every bound this runtime relies on; called by `SatMap::new`.
+    ///
+    /// # Errors
+    /// The first violated bound, as a [`DimsError`].
+    pub fn validate(&self) -> Result<(), DimsError> {
+        let sizes = [
+            ("embed_dims", self.embed_dims),
+            ("bev_h", self.bev_h),
+            ("bev_w", self.bev_w),
+            ("num_vec", self.num_vec),
+            ("num_pts", self.num_pts),
+            ("top_k", self.top_k),
+            ("image_h", self.image_h),
+            ("image_w", self.image_w),
+            ("pad_h", self.pad_h),
+            ("pad_w", self.pad_w),
+            ("feat_h", self.feat_h),
+            ("feat_w", self.feat_w),
+            ("kernel_h", self.kernel_h),
+            ("kernel_w", self.kernel_w),
+            ("sat_h", self.sat_h),
+            ("sat_w", self.sat_w),
+        ];
+        if let Some((field, _)) = sizes.iter().find(|(_, v)| *v == 0) {
+            return Err(DimsError::Zero { field });
+        }
+        if self.pc_range_m.iter().any(|v| !v.is_finite()) {
+            return Err(DimsError::NonFinite {
+                field: "pc_range_m",
+            });
+        }
+        if self.gkt_heights_m.iter().any(|v| !v.is_finite()) {
+            return Err(DimsError::NonFinite {
+                field: "gkt_heights_m",
+            });
+        }
+        if !self.image_scale.is_finite() {
+            return Err(DimsError::NonFinite {
+                field: "image_scale",
+            });
+        }
+        if !self.sat_gsd_m.is_finite() {
+            return Err(DimsError::NonFinite { field: "sat_gsd_m" });
+        }
+        if self.image_scale <= 0.0 {
+            return Err(DimsError::NotPositive {
+                field: "image_scale",
+            });
+        }
+        if self.sat_gsd_m <= 0.0 {
+            return Err(DimsError::NotPositive { field: "sat_gsd_m" });
+        }
+        for axis in 0..3u8 {
+            let a = usize::from(axis);
+            if self.pc_range_m[a] >= self.pc_range_m[a + 3] {
+                return Err(DimsError::EmptyRange { axis });
+            }
+        }
+        if !self.embed_dims.is_multiple_of(NUM_HEADS) {
+            return Err(DimsError::EmbedDimsNotDivisibleByHeads {
+                embed_dims: self.embed_dims,
+                heads: NUM_HEADS,
+            });
+        }
+        let queries = self.bev_h.saturating_mul(self.bev_w);
+        if queries > MAX_QUERIES {
+            return Err(DimsError::TooManyQueries {
+                queries,
+                max: MAX_QUERIES,
+            });
+        }
+        let features = self.feat_h.saturating_mul(self.feat_w);
+        if features > MAX_FEATURES {
+            return Err(DimsError::TooManyFeatures {
+                features,
+                max: MAX_FEATURES,
+            });
+        }
+        let points = self.kernel_h.saturating_mul(self.kernel_w);
+        if points > MAX_KERNEL_POINTS {
+            return Err(DimsError::KernelTooLarge {
+                points,
+                max: MAX_KERNEL_POINTS,
+            });
+        }
+        if self.num_pts != NUM_POINTS {
+            return Err(DimsError::PointsMismatch {
+                num_pts: self.num_pts,
+                expected: NUM_POINTS,
+            });
+        }
+        let max_k = MAX_TOP_K.min(self.num_vec.saturating_mul(NUM_CLASSES));
+        if self.top_k > max_k {
+            return Err(DimsError::TopKTooLarge {
+                top_k: self.top_k,
+                max: max_k,
+            });
+        }
+        if self.pad_h < self.image_h {
+            return Err(DimsError::PaddingSmallerThanImage { height: true });
+        }
+        if self.pad_w < self.image_w {
+            return Err(DimsError::PaddingSmallerThanImage { height: false });
+        }
+        // Large but valid sizes must not overflow the derived buffer lengths.
+        let lens = [
+            self.value_len().checked_mul(MAX_CAMERAS),
+            queries.checked_mul(self.embed_dims),
+            self.image_h
+                .checked_mul(self.image_w)
+                .and_then(|v| v.checked_mul(3)),
+            self.sat_h
+                .checked_mul(self.sat_w)
+                .and_then(|v| v.checked_mul(3)),
+            self.num_vec.checked_mul(NUM_POINTS * 2),
+        ];
+        if lens.iter().any(Option::is_none) {
+            return Err(DimsError::TooManyFeatures {
+                features,
+                max: MAX_FEATURES,
+            });
+        }
+        Ok(())
+    }
+
+    /// The `test` configuration of `ARCHITECTURE.md` (D = 32, 320x180 images, 6x10 features).
+    #[must_use]
+    pub const fn test_config() -> Self {
+        Self {
+            embed_dims: 32,
+            bev_h: 80,
+            bev_w: 40,
+            pc_range_m: [-15.0, -30.0, -2.0, 15.0, 30.0, 2.0],
+            num_vec: 50,
+            num_pts: NUM_POINTS,
+            top_k: 50,
+            image_h: 180,
+            image_w: 320,
+            pad_h: 192,
+            pad_w: 320,
+            image_scale: 0.2,
+            feat_h: 6,
+            feat_w: 10,
+            gkt_heights_m: [-1.5, -0.5, 0.5, 1.5],
+            kernel_h: 3,
+            kernel_w: 5,
+            sat_h: 200,
+            sat_w: 100,
+            sat_gsd_m: 0.3,
+        }
+    }
+
+    /// The paper's shapes (D = 256, 800x450 images padded to 800x480, 15x25 features).
+    #[must_use]
+    pub const fn paper_config() -> Self {
+        Self {
+            embed_dims: 256,
+            image_h: 450,
+            image_w: 800,
+            pad_h: 480,
+            pad_w: 800,
+            image_scale: 0.5,
+            feat_h: 15,
+            feat_w: 25,
+            ..Self::test_config()
+        }
+    }
+}
+
+/// Camera names a manifest must list, in model order (re-exported for manifest checks).
+pub const MANIFEST_CAMERAS: [&str; MAX_CAMERAS] = CAMERA_NAMES;
+
+#[cfg(feature = "std")]
+mod manifest_table {
+    //! The `[model]` table exactly as the manifest spells it; converted into [`ModelDims`].
+    use super::{CLASS_NAMES, MANIFEST_CAMERAS, ModelDims, NUM_HEADS};
+
+    /// Raw `[model]` table (see `ARCHITECTURE.md`, "Bundle").
+    #[derive(serde::Deserialize)]
+    pub(super) struct ModelTable {
+        #[allow(
+            dead_code,
+            reason = "the config name is informative; shapes carry the meaning"
+        )]
+        config: Option<String>,
+        embed_dims: usize,
+        bev_h: usize,
+        bev_w: usize,
+        pc_range_m: [f32; 6],
+        classes: Vec<String>,
+        num_vec: usize,
+        num_pts: usize,
+        top_k: usize,
+        cameras: Vec<String>,
+        image_scale: f64,
+        image_h: usize,
+        image_w: usize,
+        pad_h: usize,
+        pad_w: usize,
+        feat_h: usize,
+        feat_w: usize,
+        gkt_heights_m: [f32; NUM_HEADS],
+        gkt_kernel: [usize; 2],
+        sat_h: usize,
+        sat_w: usize,
+        sat_gsd_m: f64,
+    }
+
+    impl TryFrom<ModelTable> for ModelDims {
+        type Error = String;
+
+        fn try_from(t: ModelTable) -> Result<Self, Self::Error> {
+            if t.classes.iter().map(String::as_str).ne(CLASS_NAMES) {
+                return Err(format!(
+                    "classes {:?} differ from {CLASS_NAMES:?}",
+                    t.classes
+                ));
+            }
+            if t.cameras.iter().map(String::as_str).ne(MANIFEST_CAMERAS) {
+                return Err(format!(
+                    "cameras {:?} differ from {MANIFEST_CAMERAS:?}",
+                    t.cameras
+                ));
+            }
+            let dims = ModelDims {
+                embed_dims: t.embed_dims,
+                bev_h: t.bev_h,
+                bev_w: t.bev_w,
+                pc_range_m: t.pc_range_m,
+                num_vec: t.num_vec,
+                num_pts: t.num_pts,
+                top_k: t.top_k,
+                image_h: t.image_h,
+                image_w: t.image_w,
+                pad_h: t.pad_h,
+                pad_w: t.pad_w,
+                image_scale: t.image_scale,
+                feat_h: t.feat_h,
+                feat_w: t.feat_w,
+                gkt_heights_m: t.gkt_heights_m,
+                kernel_h: t.gkt_kernel[0],
+                kernel_w: t.gkt_kernel[1],
+                sat_h: t.sat_h,
+                sat_w: t.sat_w,
+                sat_gsd_m: t.sat_gsd_m,
+            };
+            dims.validate().map_err(|e| e.to_string())?;
+            Ok(dims)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn test_and_paper_configs_validate() {
+        assert_eq!(ModelDims::test_config().validate(), Ok(()));
+        assert_eq!(ModelDims::paper_config().validate(), Ok(()));
+        let d = ModelDims::paper_config();
+        assert_eq!(d.num_queries(), 3200);
+        assert_eq!(d.num_features(), 375);
+        assert_eq!(d.head_dims(), 64);
+        assert_eq!(d.weights_len(), 3200 * 60);
+    }
+
+    #[test]
+    fn validate_reports_each_bound() {
+        let mut d = ModelDims::test_config();
+        d.top_k = 51;
+        assert_eq!(
+            d.validate(),
+            Err(DimsError::TopKTooLarge { top_k: 51, max: 50 })
+        );
+        let mut d = ModelDims::test_config();
+        d.embed_dims = 30;
+        assert!(matches!(
+            d.validate(),
+            Err(DimsError::EmbedDimsNotDivisibleByHeads { .. })
+        ));
+        let mut d = ModelDims::test_config();
+        d.feat_w = 0;
+        assert_eq!(d.validate(), Err(DimsError::Zero { field: "feat_w" }));
+        let mut d = ModelDims::test_config();
+        d.pc_range_m[4] = -40.0;
+        assert_eq!(d.validate(), Err(DimsError::EmptyRange { axis: 1 }));
+        let mut d = ModelDims::test_config();
+        d.num_pts = 10;
+        assert!(matches!(
+            d.validate(),
+            Err(DimsError::PointsMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn crop_spec_matches_range() {
+        let s = ModelDims::test_config().crop_spec();
+        assert_eq!((s.height_px, s.width_px), (200, 100));
+        assert_eq!((s.x_min_m, s.y_min_m, s.gsd_m), (-15.0, -30.0, 0.3));
+    }
+
+    #[cfg(feature = "std")]
+    #[test]
+    fn deserialises_the_manifest_model_table() {
+        let text = r#"
+config = "test"
+embed_dims = 32
+bev_h = 80
+bev_w = 40
+pc_range_m = [-15.0, -30.0, -2.0, 15.0, 30.0, 2.0]
+classes = ["divider", "ped_crossing", "boundary"]
+num_vec = 50
+num_pts = 20
+top_k = 50
+cameras = ["CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_FRONT_LEFT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_BACK_RIGHT"]
+image_scale = 0.2
+image_h = 180
+image_w = 320
+pad_h = 192
+pad_w = 320
+feat_h = 6
+feat_w = 10
+gkt_heights_m = [-1.5, -0.5, 0.5, 1.5]
+gkt_kernel = [3, 5]
+sat_h = 200
+sat_w = 100
+sat_gsd_m = 0.3
+"#;
+        let dims: ModelDims = toml::from_str(text).unwrap();
+        assert_eq!(dims, ModelDims::test_config());
+        let bad = text.replace("\"boundary\"", "\"kerb\"");
+        assert!(toml::from_str::<ModelDims>(&bad).is_err());
+        let bad = text.replace("top_k = 50", "top_k = 60");
+        assert!(toml::from_str::<ModelDims>(&bad).is_err());
+    }
+}
