@@ -402,6 +402,9 @@ fn prefetch_verifies_tiles_ahead_within_the_per_step_bound() {
         }
     }
     assert!(prefetched > 0);
+    // "Pose inside the route" input check: distance to the polyline.
+    assert!((source.distance_to_route_m(DVec2::new(50.0, 7.0)).unwrap() - 7.0).abs() < 1e-9);
+    assert!((source.distance_to_route_m(DVec2::new(103.0, -4.0)).unwrap() - 5.0).abs() < 1e-9);
     // Every tile was verified exactly once (the cache is large enough for this corridor).
     assert_eq!(source.cache().verified_total(), 14);
 }

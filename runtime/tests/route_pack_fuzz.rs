@@ -8,7 +8,9 @@ use proptest::prelude::*;
 use route_pack_common::{draw_pack, grid};
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::format::HEADER_LEN;
-use satmap_runtime::route_pack::{PackError, PackSource, RoutePack};
+use satmap_runtime::route_pack::{
+    MAX_CROP_TILES, PREFETCH_TILES_PER_STEP, PackError, PackSource, RoutePack,
+};
 use satmap_runtime::satellite::{CropSpec, SatelliteSource};
 use xxhash_rust::xxh3::xxh3_64;
 
@@ -129,5 +131,38 @@ proptest! {
         bytes.extend(std::iter::repeat_n(0u8, extra));
         reseal(&mut bytes);
         exercise(&bytes);
+    }
+
+    #[test]
+    fn arbitrary_poses_and_specs_never_panic(
+        x in prop_oneof![-50.0f64..50.0, any::<f64>()],
+        y in prop_oneof![-50.0f64..50.0, any::<f64>()],
+        yaw in prop_oneof![-10.0f64..10.0, any::<f64>()],
+        h in 0usize..40,
+        w in 0usize..40,
+        gsd in prop_oneof![0.01f64..2.0, any::<f64>()],
+        x_min in prop_oneof![-20.0f64..0.0, any::<f64>()],
+        y_min in prop_oneof![-20.0f64..0.0, any::<f64>()],
+        far_route in any::<bool>(),
+    ) {
+        // Including a finite but astronomically distant route vertex (prefetch must not loop).
+        let route = if far_route {
+            vec![DVec2::new(0.0, 0.0), DVec2::new(1e300, -1e300), DVec2::new(-1e300, 5.0)]
+        } else {
+            vec![DVec2::new(0.5, 0.5), DVec2::new(6.0, 3.0)]
+        };
+        let bytes = draw_pack(8, 0.5, grid(-1, 2, -1, 1), &route, |x, y| [x as u8, y as u8, 3]);
+        let mut source = PackSource::from_bytes(&bytes).unwrap();
+        let spec = CropSpec { height_px: h, width_px: w, gsd_m: gsd, x_min_m: x_min, y_min_m: y_min };
+        let mut out = vec![1u8; h * w * 3];
+        let pose = EgoPose::new(DVec2::new(x, y), yaw);
+        let coverage = source.crop(&pose, &spec, &mut out);
+        let report = *source.last_report();
+        prop_assert_eq!(report.coverage, coverage);
+        prop_assert!(report.covered_px <= report.total_px);
+        prop_assert!(usize::from(report.verified_tiles) <= MAX_CROP_TILES + PREFETCH_TILES_PER_STEP);
+        if report.covered_px == 0 {
+            prop_assert!(out.iter().all(|v| *v == 0));
+        }
     }
 }

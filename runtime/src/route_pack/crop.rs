@@ -219,6 +219,15 @@ impl<'a> PackSource<'a> {
         &self.cache
     }
 
+    /// Distance from route-frame point `p` to the pack's route polyline, metres (`None` when
+    /// the pack has fewer than two route points). Scans the whole route: for input checks
+    /// ("pose inside the route"), not for every pixel.
+    #[must_use]
+    pub fn distance_to_route_m(&self, p: DVec2) -> Option<f64> {
+        let segments = self.pack.route_point_count().checked_sub(1)?;
+        self.nearest_in(p, 0, segments).map(|(_, _, d)| d)
+    }
+
     /// Report of the last crop.
     #[must_use]
     pub const fn last_report(&self) -> &CropReport {
@@ -457,10 +466,19 @@ impl<'a> PackSource<'a> {
     /// Verify uncached tiles within `reach_m` of `p`; true when the step's budget is spent.
     fn prefetch_around(&mut self, p: DVec2, reach_m: f64, budget_start: usize) -> bool {
         let side_m = self.pack.tile_side_m();
-        let tx0 = libm::floor((p.x - reach_m) / side_m) as i32;
-        let tx1 = libm::floor((p.x + reach_m) / side_m) as i32;
-        let ty0 = libm::floor((p.y - reach_m) / side_m) as i32;
-        let ty1 = libm::floor((p.y + reach_m) / side_m) as i32;
+        let lo = ((p - DVec2::splat(reach_m)) / side_m).floor();
+        let hi = ((p + DVec2::splat(reach_m)) / side_m).floor();
+        // The crop itself spans at most MAX_CROP_TILES tiles, so a wider square (or a point off
+        // the i32 tile grid) cannot be a future crop's: skip it rather than loop over it.
+        let span = hi - lo;
+        let grid = f64::from(i32::MAX);
+        if !(span.max_element() < MAX_CROP_TILES as f64
+            && lo.abs().max_element() < grid
+            && hi.abs().max_element() < grid)
+        {
+            return false;
+        }
+        let (tx0, tx1, ty0, ty1) = (lo.x as i32, hi.x as i32, lo.y as i32, hi.y as i32);
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
                 if self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP {

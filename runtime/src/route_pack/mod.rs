@@ -27,6 +27,6 @@ pub mod format;
 pub mod writer;
 
 pub use cache::{PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES};
-pub use crop::{CropReport, FILL_RGB, MAX_CROP_TILES, PackSource};
+pub use crop::{CropFault, CropReport, FILL_RGB, MAX_CROP_TILES, PackSource};
 pub use format::{PackError, PackHeader, RoutePack, TileKey};
 pub use writer::{PackTile, encode_pack};
