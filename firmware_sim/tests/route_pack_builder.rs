@@ -276,6 +276,29 @@ fn missing_tiles_route_outside_and_unreadable_images_are_clear_errors() {
 }
 
 #[test]
+fn an_explicit_origin_keeps_the_callers_frame() {
+    // Route starting 20 m east of ORIGIN, pack frame pinned to ORIGIN: route-frame positions are
+    // those of `world`, so the marker check holds unchanged.
+    let dir = scratch("origin");
+    write_tiles(&dir, ZOOM, DVec2::new(-30.0, -30.0), DVec2::new(90.0, 40.0));
+    let path = [
+        DVec2::new(20.0, 0.0),
+        DVec2::new(30.0, 5.0),
+        DVec2::new(60.0, 10.0),
+    ];
+    let mut tiles = SlippyTiles::open(&dir, None).unwrap();
+    let pinned = BuildOptions {
+        origin: Some(ORIGIN),
+        ..opts()
+    };
+    let built = build_pack(&mut tiles, &route(&path), &pinned).unwrap();
+    let pack = RoutePack::parse(&built.bytes).unwrap();
+    assert!(pack.route_point(0).unwrap().distance(path[0]) < 1e-3);
+    check_pack(&built.bytes);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn geojson_routes_in_their_usual_wrappings() {
     let p = Path::new("r.geojson");
     let line = r#"{"type": "LineString", "coordinates": [[-71.05, 42.33], [-71.04, 42.34, 12.0]]}"#;
@@ -332,6 +355,7 @@ fn build_pack_command_writes_a_loadable_pack() {
         tile_px: 64,
         allow_missing: false,
         quiet: true,
+        origin: None,
     };
     satmap_sim::cli::build_pack::run(&args).unwrap();
     let bytes = std::fs::read(dir.join("route.pack")).unwrap();

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use satmap_runtime::geo::Geodetic;
 
 use crate::route_pack_builder::{
     BuildOptions, Imagery, SlippyTiles, WorldCrs, WorldFileImage, build_pack, read_route_geojson,
@@ -48,6 +49,27 @@ pub struct Args {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Route-frame origin as `LAT,LON[,HEIGHT]` (WGS84 degrees, metres); default: the route's
+    /// first point at height 0. Use a synthetic world's anchor to keep its frame.
+    #[arg(long, value_parser = parse_origin, allow_hyphen_values = true)]
+    pub origin: Option<Geodetic>,
+}
+
+fn parse_origin(text: &str) -> Result<Geodetic, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>().map_err(|e| format!("`{s}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    let g = match v[..] {
+        [lat, lon] => Geodetic::new(lat, lon, 0.0),
+        [lat, lon, h] => Geodetic::new(lat, lon, h),
+        _ => return Err("expected LAT,LON or LAT,LON,HEIGHT".into()),
+    };
+    if g.is_valid() && (-180.0..=180.0).contains(&g.lon_deg) {
+        Ok(g)
+    } else {
+        Err(format!("{text} is not a WGS84 position"))
+    }
 }
 
 /// Build the pack and write it; prints a one-line summary.
@@ -71,6 +93,7 @@ pub fn run(args: &Args) -> Result<()> {
         tile_size_px: args.tile_px,
         allow_missing: args.allow_missing,
         show_progress: !args.quiet,
+        origin: args.origin,
     };
     let started = std::time::Instant::now();
     let built = build_pack(imagery.as_mut(), &route, &opts)?;

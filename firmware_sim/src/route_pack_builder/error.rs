@@ -1,4 +1,5 @@
-//! Errors of the route-pack builder, each with the input it concerns.
+//! Errors of the route-pack builder, each with the input it concerns. Causes are chained as
+//! `source()` (anyhow prints them with `{:#}`), not repeated in the message.
 
 use std::path::PathBuf;
 
@@ -6,7 +7,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {
     /// A file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -14,7 +15,7 @@ pub enum BuildError {
         source: std::io::Error,
     },
     /// The route file is not GeoJSON.
-    #[error("route {path} is not valid GeoJSON: {source}")]
+    #[error("route {path} is not valid GeoJSON")]
     RouteGeoJson {
         /// The route file.
         path: PathBuf,
@@ -30,7 +31,7 @@ pub enum BuildError {
         reason: String,
     },
     /// An image could not be decoded.
-    #[error("unreadable image {path}: {source}")]
+    #[error("unreadable image {path}")]
     UnreadableImage {
         /// The image.
         path: PathBuf,

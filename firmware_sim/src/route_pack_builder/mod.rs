@@ -5,7 +5,7 @@
 //! georeferenced image with a world file; a route as a GeoJSON LineString in WGS84; a corridor
 //! width and a target ground sampling distance. The builder resamples the imagery **once** into
 //! the route frame, the local ENU tangent plane at the route's first point (at ellipsoid height
-//! 0), so the vehicle never projects per pixel.
+//! 0) unless an origin is given, so the vehicle never projects per pixel.
 //!
 //! - [`route`]: reading the GeoJSON route.
 //! - [`imagery`]: the imagery sources ([`SlippyTiles`], [`WorldFileImage`]) behind [`Imagery`].

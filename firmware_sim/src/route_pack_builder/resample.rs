@@ -1,9 +1,10 @@
 //! Choosing the pack tiles that cover the route corridor and filling them by resampling the
 //! imagery once into the route frame.
 //!
-//! Route frame: local ENU at the route's first point, ellipsoid height 0. Pack pixel centre
-//! `(x, y)` is taken as the ground point with ENU coordinates `(x, y, -(x^2 + y^2) / 2R)` (the
-//! tangent plane dropped back to the ellipsoid, R = 6 371 km), converted to WGS84, then
+//! Route frame: local ENU at the route's first point, ellipsoid height 0 (or at
+//! [`BuildOptions::origin`]). Pack pixel centre `(x, y)` is taken as the ground point with ENU
+//! coordinates `(x, y, -h0 - (x^2 + y^2) / 2R)` (the tangent plane dropped back to the
+//! ellipsoid; h0 the origin's height, R = 6 371 km), converted to WGS84, then
 //! projected into the imagery. The exact chain runs on a grid of nodes every
 //! [`NODE_STEP_PX`] pixels; pixels in between interpolate the node's source coordinates
 //! bilinearly (the map is smooth: the interpolation error is far below 1e-3 source px).
@@ -36,6 +37,9 @@ pub struct BuildOptions {
     pub allow_missing: bool,
     /// Draw a progress bar on stderr.
     pub show_progress: bool,
+    /// Origin of the route frame; `None`: the route's first point at ellipsoid height 0. Give
+    /// the frame the poses are expressed in (e.g. a synthetic world's anchor) to use it as is.
+    pub origin: Option<Geodetic>,
 }
 
 impl Default for BuildOptions {
@@ -46,6 +50,7 @@ impl Default for BuildOptions {
             tile_size_px: 256,
             allow_missing: false,
             show_progress: false,
+            origin: None,
         }
     }
 }
@@ -76,8 +81,9 @@ pub fn build_pack(
     opts: &BuildOptions,
 ) -> Result<BuiltPack, BuildError> {
     check_options(opts)?;
-    let origin = match route.first() {
-        Some(p) if route.len() >= 2 => Geodetic::new(p.lat_deg, p.lon_deg, 0.0),
+    let origin = match (route.first(), opts.origin) {
+        (Some(_), Some(origin)) if route.len() >= 2 => origin,
+        (Some(p), None) if route.len() >= 2 => Geodetic::new(p.lat_deg, p.lon_deg, 0.0),
         _ => {
             return Err(BuildError::Option(
                 "the route needs at least two points".into(),
@@ -223,12 +229,10 @@ fn fill_tile(
             (f64::from(key.tile_y) * s as f64 + r as f64 + 0.5) * gsd,
         )
     };
+    let drop_m = frame.origin().height_m;
     let ground = |p: DVec2| {
-        frame.enu_to_geodetic(DVec3::new(
-            p.x,
-            p.y,
-            -p.length_squared() / (2.0 * EARTH_RADIUS_M),
-        ))
+        let z_m = -drop_m - p.length_squared() / (2.0 * EARTH_RADIUS_M);
+        frame.enu_to_geodetic(DVec3::new(p.x, p.y, z_m))
     };
     let mut grid = Vec::with_capacity(nodes * nodes);
     for nr in 0..nodes {
