@@ -21,6 +21,15 @@ pub enum InitError {
         /// What is wrong with it.
         fault: CalibrationFault,
     },
+    /// The model needs more bytes in a region than `memory_layout.toml` gives it.
+    RegionTooSmall {
+        /// Region name, as in `memory_layout.toml`.
+        region: &'static str,
+        /// Bytes the model's dimensions need.
+        needed_bytes: usize,
+        /// Capacity of the region, bytes.
+        capacity_bytes: usize,
+    },
     /// A fixed buffer could not be reserved.
     OutOfMemory {
         /// Bytes requested.
@@ -35,6 +44,11 @@ impl fmt::Display for InitError {
             Self::InvalidCalibration { camera, fault } => {
                 write!(f, "calibration of camera {camera}: {fault}")
             }
+            Self::RegionTooSmall { region, needed_bytes, capacity_bytes } => write!(
+                f,
+                "region `{region}` does not fit: the model needs {needed_bytes} bytes, \
+                 memory_layout.toml gives {capacity_bytes}"
+            ),
             Self::OutOfMemory { bytes } => write!(f, "cannot reserve a buffer of {bytes} bytes"),
         }
     }
@@ -45,7 +59,7 @@ impl core::error::Error for InitError {
         match self {
             Self::Dims(e) => Some(e),
             Self::InvalidCalibration { fault, .. } => Some(fault),
-            Self::OutOfMemory { .. } => None,
+            Self::RegionTooSmall { .. } | Self::OutOfMemory { .. } => None,
         }
     }
 }

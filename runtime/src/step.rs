@@ -58,10 +58,13 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// every buffer.
     ///
     /// # Errors
-    /// [`InitError::Dims`], [`InitError::InvalidCalibration`] or [`InitError::OutOfMemory`].
+    /// [`InitError::Dims`], [`InitError::RegionTooSmall`] (a region of `memory_layout.toml`
+    /// cannot hold the model's buffers), [`InitError::InvalidCalibration`] or
+    /// [`InitError::OutOfMemory`].
     pub fn new(engine: E, calibration: &Calibration, satellite: S) -> Result<Self, InitError> {
         let dims = engine.dims().clone();
         dims.validate()?;
+        crate::capacity::check_regions(&dims)?;
         let lut = Lut::new(&dims, calibration)?;
         Ok(Self {
             value: zeroed(NUM_CAMERAS * dims.value_len())?,

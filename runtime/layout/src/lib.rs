@@ -150,6 +150,20 @@ pub enum LayoutError {
     /// A budget the harness needs is missing.
     #[error("ERROR(layout): [budgets.latency_us] has no `{0}`")]
     MissingBudget(&'static str),
+    /// The step period is zero (the replay clock would not advance).
+    #[error("ERROR(layout): [budgets] step_period_us is 0; give the deadline of one step in microseconds")]
+    ZeroStepPeriod,
+    /// The peak budget is larger than the arena, so it could never be checked.
+    #[error(
+        "ERROR(layout): [budgets] peak_bytes = {peak} exceeds [arena] bytes = {arena}; the arena \
+         caps the peak. Lower peak_bytes or raise the arena."
+    )]
+    PeakAboveArena {
+        /// Peak budget.
+        peak: usize,
+        /// Arena size.
+        arena: usize,
+    },
     /// The runtime-owned regions plus the graph engine do not fit the arena.
     #[error(
         "ERROR(layout): runtime regions ({regions} bytes) + graph engine ({graph} bytes) = {total} \
@@ -165,6 +179,23 @@ pub enum LayoutError {
         /// Arena size.
         arena: usize,
     },
+}
+
+impl LayoutError {
+    /// Name of the variant, for tests and machine-readable reports.
+    #[must_use]
+    pub const fn kind(&self) -> &'static str {
+        match self {
+            Self::Parse(_) => "Parse",
+            Self::Bytes { .. } => "Bytes",
+            Self::ElemBytes(_) => "ElemBytes",
+            Self::MissingRegion(_) => "MissingRegion",
+            Self::MissingBudget(_) => "MissingBudget",
+            Self::ZeroStepPeriod => "ZeroStepPeriod",
+            Self::PeakAboveArena { .. } => "PeakAboveArena",
+            Self::ArenaTooSmall { .. } => "ArenaTooSmall",
+        }
+    }
 }
 
 /// Regions the runtime cannot run without.
@@ -185,11 +216,12 @@ pub const REQUIRED_REGIONS: [&str; 13] = [
 ];
 
 /// Latency budgets the harness checks.
-pub const REQUIRED_BUDGETS: [&str; 7] = [
+pub const REQUIRED_BUDGETS: [&str; 8] = [
     "image_encoder",
     "bev_query",
     "gkt_gather",
     "bev_encoder",
+    "satellite_crop",
     "satellite_encoder",
     "map_decoder",
     "step",
@@ -237,6 +269,15 @@ impl MemoryLayout {
                 });
             }
         }
+        if self.budgets.step_period_us == 0 {
+            return Err(LayoutError::ZeroStepPeriod);
+        }
+        if self.budgets.peak_bytes > self.arena.bytes {
+            return Err(LayoutError::PeakAboveArena {
+                peak: self.budgets.peak_bytes,
+                arena: self.arena.bytes,
+            });
+        }
         let regions = self.runtime_bytes();
         let total = regions.saturating_add(self.arena.graph_engine_bytes);
         if total > self.arena.bytes {
@@ -248,6 +289,12 @@ impl MemoryLayout {
             });
         }
         Ok(())
+    }
+
+    /// A region by name.
+    #[must_use]
+    pub fn region(&self, name: &str) -> Option<&Region> {
+        self.region.get(name)
     }
 
     /// Bytes of all runtime-owned regions.
@@ -269,8 +316,12 @@ impl MemoryLayout {
         let _ = writeln!(s, "pub const SIZED_FOR: &str = {:?};", self.sized_for);
         for (name, r) in &self.region {
             let upper = name.to_uppercase();
-            let _ = writeln!(s, "/// `{name}`: {} (capacity, bytes).", r.doc);
+            let _ = writeln!(s, "/// `{name}`: {} (capacity, bytes).", r.doc.replace('\n', " "));
             let _ = writeln!(s, "pub const {upper}_BYTES: usize = {};", r.bytes);
+            if let Some(elem) = r.elem_bytes {
+                let _ = writeln!(s, "/// `{name}`: bytes of one record.");
+                let _ = writeln!(s, "pub const {upper}_ELEM_BYTES: usize = {elem};");
+            }
             let _ = writeln!(s, "/// `{name}`: shape (capacity).");
             let _ = writeln!(
                 s,
@@ -291,10 +342,22 @@ impl MemoryLayout {
         let _ = writeln!(s, "pub const PEAK_BUDGET_BYTES: usize = {};", self.budgets.peak_bytes);
         let _ = writeln!(s, "/// Step period (deadline), microseconds.");
         let _ = writeln!(s, "pub const STEP_PERIOD_US: u64 = {};", self.budgets.step_period_us);
+        let _ = writeln!(s, "/// Machine and configuration the latency budgets are stated for.");
+        let _ = writeln!(s, "pub const BUDGET_REFERENCE: &str = {:?};", self.budgets.reference);
         for (name, us) in &self.budgets.latency_us {
             let _ = writeln!(s, "/// Latency budget of `{name}`, microseconds.");
             let _ = writeln!(s, "pub const {}_BUDGET_US: u64 = {us};", name.to_uppercase());
         }
+        let _ = writeln!(s, "/// Every latency budget as (name, microseconds).");
+        let _ = writeln!(
+            s,
+            "pub const LATENCY_BUDGETS_US: [(&str, u64); {}] = [",
+            self.budgets.latency_us.len()
+        );
+        for (name, us) in &self.budgets.latency_us {
+            let _ = writeln!(s, "    ({name:?}, {us}),");
+        }
+        let _ = writeln!(s, "];");
         s
     }
 
