@@ -5,4 +5,7 @@
 #![deny(missing_docs)]
 
 pub mod cli;
+pub mod eval;
+pub mod render;
+pub mod synth;
 pub mod route_pack_builder;

@@ -17,12 +17,21 @@ struct Cli {
 enum Command {
     /// Build a route pack from slippy-map tiles or a georeferenced image and a GeoJSON route.
     BuildPack(satmap_sim::cli::build_pack::Args),
+    /// Generate a seeded synthetic drive as a scenario folder (tiles, route, frames, GT).
+    SynthDrive(satmap_sim::cli::synth_drive::Args),
+    /// Chamfer-AP of a MapTR-layout predictions file against a ground-truth file.
+    Evaluate(satmap_sim::cli::evaluate::Args),
+    /// Pictures of a scenario: satellite crop with GT and predictions, contact sheet, GeoJSON.
+    Render(satmap_sim::cli::render::Args),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::BuildPack(args) => satmap_sim::cli::build_pack::run(&args),
+        Command::SynthDrive(args) => satmap_sim::cli::synth_drive::run(&args),
+        Command::Evaluate(args) => satmap_sim::cli::evaluate::run(&args),
+        Command::Render(args) => satmap_sim::cli::render::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
