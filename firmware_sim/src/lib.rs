@@ -4,8 +4,10 @@
 //! modules are the libraries those commands and the integration tests use.
 #![deny(missing_docs)]
 
+pub mod arena;
 pub mod cli;
 pub mod eval;
+pub mod harness;
 pub mod render;
 pub mod synth;
 pub mod route_pack_builder;

@@ -4,6 +4,15 @@
 //! dispatches, so that adding a tool touches one enum line here.
 
 use clap::{Parser, Subcommand};
+use satmap_runtime::capacity::layout::ARENA_BYTES;
+use satmap_sim::arena::{ArenaAllocator, ArenaStorage};
+
+/// The process allocator: the system's until `drive` hands it the arena, then the counting TLSF
+/// heap over [`ARENA`]. Library users and unit tests keep the system allocator.
+#[global_allocator]
+static ALLOC: ArenaAllocator = ArenaAllocator::new();
+/// The fixed arena, `[arena] bytes` of memory_layout.toml (in .bss: untouched pages cost nothing).
+static ARENA: ArenaStorage<ARENA_BYTES> = ArenaStorage::new();
 
 /// SatMap host harness and tools.
 #[derive(Parser)]
@@ -23,6 +32,12 @@ enum Command {
     Evaluate(satmap_sim::cli::evaluate::Args),
     /// Pictures of a scenario: satellite crop with GT and predictions, contact sheet, GeoJSON.
     Render(satmap_sim::cli::render::Args),
+    /// Replay a drive through the runtime inside the fixed arena and report against the budgets.
+    Drive(satmap_sim::cli::drive::Args),
+    /// Print memory_layout.toml as a linker map (regions, totals, headroom).
+    MemoryMap(satmap_sim::cli::memory_map::Args),
+    /// Run every stage of bundles in tract and compare with their onnxruntime reference outputs.
+    CheckBundle(satmap_sim::cli::check_bundle::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -32,12 +47,17 @@ fn main() -> std::process::ExitCode {
         Command::SynthDrive(args) => satmap_sim::cli::synth_drive::run(&args),
         Command::Evaluate(args) => satmap_sim::cli::evaluate::run(&args),
         Command::Render(args) => satmap_sim::cli::render::run(&args),
+        Command::Drive(args) => {
+            satmap_sim::cli::drive::run(&args, &ALLOC, &|bytes| ALLOC.init(&ARENA, bytes))
+        }
+        Command::MemoryMap(args) => satmap_sim::cli::memory_map::run(&args),
+        Command::CheckBundle(args) => satmap_sim::cli::check_bundle::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(satmap_sim::cli::drive::exit_code(&e))
         }
     }
 }

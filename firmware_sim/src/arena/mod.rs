@@ -7,15 +7,57 @@
 //! after `init` comes from the arena. When the arena is exhausted the allocator writes a report
 //! naming the region and the sizes to stderr (without allocating) and exits with
 //! [`EXIT_ARENA_EXHAUSTED`], instead of the standard library's bare abort.
+//!
+//! The harness labels what is being allocated ([`ArenaRegion`]: graph engine, runtime regions,
+//! a step) so that the exhaustion report names the region that did not fit, and it runs the
+//! host-side simulation (rendering sensor frames, ground truth, evaluation, the report) inside
+//! [`ArenaAllocator::host_side`], which serves from the system allocator: the arena then holds
+//! exactly what the ECU would hold. The replay is single-threaded, so one global flag suffices.
 
 use core::alloc::{GlobalAlloc, Layout};
 use core::cell::UnsafeCell;
-use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 use std::alloc::System;
 use std::io::Write;
 
 /// Process exit code when the arena cannot satisfy an allocation.
 pub const EXIT_ARENA_EXHAUSTED: i32 = 3;
+
+/// What the arena is serving at the moment: named in the exhaustion report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum ArenaRegion {
+    /// Before the harness labelled anything.
+    Unlabelled = 0,
+    /// Loading and planning the graph engine (`[arena] graph_engine_bytes`).
+    GraphEngine = 1,
+    /// The runtime's fixed buffers reserved by `SatMap::new` (the `[region.*]` entries).
+    RuntimeRegions = 2,
+    /// One replay step (graph engine activations; the runtime itself allocates nothing).
+    Step = 3,
+}
+
+impl ArenaRegion {
+    /// Name used in reports, as in `memory_layout.toml`.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Unlabelled => "arena",
+            Self::GraphEngine => "graph_engine",
+            Self::RuntimeRegions => "runtime regions",
+            Self::Step => "step activations (graph_engine)",
+        }
+    }
+
+    const fn from_u8(v: u8) -> Self {
+        match v {
+            1 => Self::GraphEngine,
+            2 => Self::RuntimeRegions,
+            3 => Self::Step,
+            _ => Self::Unlabelled,
+        }
+    }
+}
 
 /// Counters of the arena, as read at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -77,6 +119,8 @@ pub struct ArenaAllocator {
     current: AtomicUsize,
     peak: AtomicUsize,
     allocations: AtomicUsize,
+    host_side: AtomicBool,
+    region: AtomicU8,
 }
 
 impl ArenaAllocator {
@@ -91,7 +135,36 @@ impl ArenaAllocator {
             current: AtomicUsize::new(0),
             peak: AtomicUsize::new(0),
             allocations: AtomicUsize::new(0),
+            host_side: AtomicBool::new(false),
+            region: AtomicU8::new(0),
         }
+    }
+
+    /// True once [`init`](Self::init) succeeded.
+    #[must_use]
+    pub fn is_ready(&self) -> bool {
+        self.ready.load(Ordering::Acquire)
+    }
+
+    /// Label what the following allocations are for (named if the arena runs out).
+    pub fn set_region(&self, region: ArenaRegion) {
+        self.region.store(region as u8, Ordering::Relaxed);
+    }
+
+    /// The current label.
+    #[must_use]
+    pub fn region(&self) -> ArenaRegion {
+        ArenaRegion::from_u8(self.region.load(Ordering::Relaxed))
+    }
+
+    /// Run `f` with allocations served by the system allocator and not counted: the host-side
+    /// simulation around the runtime (sensor frames, ground truth, reports). Blocks it allocates
+    /// may be freed later from anywhere; `dealloc` routes them by address.
+    pub fn host_side<T>(&self, f: impl FnOnce() -> T) -> T {
+        let was = self.host_side.swap(true, Ordering::AcqRel);
+        let out = f();
+        self.host_side.store(was, Ordering::Release);
+        out
     }
 
     /// Hand the first `size_bytes` of `storage` to the heap; from now on every allocation comes
@@ -146,14 +219,16 @@ impl ArenaAllocator {
 
     fn exhausted(&self, layout: Layout) -> ! {
         let s = self.stats();
-        let mut buf = FixedBuf::<256>::new();
+        let mut buf = FixedBuf::<512>::new();
         let _ = core::fmt::write(
             &mut buf,
             format_args!(
-                "ERROR(arena): region `arena` ({} bytes, from memory_layout.toml [arena]) cannot \
-                 serve {} more bytes: {} in use, peak {}.\n",
-                s.capacity_bytes,
+                "ERROR(arena): region `{}` does not fit: it needs {} more bytes, the arena of {} \
+                 bytes has {} in use (peak {}). Raise [arena] bytes in memory_layout.toml or \
+                 pass a larger --arena-bytes.\n",
+                self.region().name(),
                 layout.size(),
+                s.capacity_bytes,
                 s.current_bytes,
                 s.peak_bytes
             ),
@@ -174,7 +249,7 @@ impl Default for ArenaAllocator {
 // to the allocator that made it.
 unsafe impl GlobalAlloc for ArenaAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if !self.ready.load(Ordering::Acquire) {
+        if !self.ready.load(Ordering::Acquire) || self.host_side.load(Ordering::Acquire) {
             // SAFETY: forwarded with the caller's layout.
             return unsafe { System.alloc(layout) };
         }

@@ -44,7 +44,7 @@ pub fn run(args: &Args) -> Result<()> {
         println!(
             "{}: config `{}`, loaded and optimised in {:.1} s",
             dir.display(),
-            bundle.dims().config,
+            crate::harness::bundle_config_name(dir),
             started.elapsed().as_secs_f64()
         );
         let bytes = std::fs::read(dir.join("reference.safetensors"))

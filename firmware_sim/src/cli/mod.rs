@@ -1,6 +1,9 @@
 //! One module per `satmap-sim` subcommand: its clap arguments and its `run` entry point.
 
 pub mod build_pack;
+pub mod check_bundle;
+pub mod drive;
 pub mod evaluate;
+pub mod memory_map;
 pub mod render;
 pub mod synth_drive;

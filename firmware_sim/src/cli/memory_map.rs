@@ -1,0 +1,45 @@
+//! `satmap-sim memory-map`: print `memory_layout.toml` like a linker map: every region with its
+//! offset, bytes, owner, dtype and shape, the totals and the arena headroom; with `--bundle`,
+//! also what that bundle needs in each region.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use satmap_layout::MemoryLayout;
+use satmap_runtime::bundle::Bundle;
+use satmap_runtime::capacity::check_regions;
+
+/// The layout this binary was built with.
+pub const BUILT_IN_LAYOUT: &str = include_str!("../../../memory_layout.toml");
+
+/// Arguments of `memory-map`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Layout file (default: the one this binary was built with).
+    #[arg(long)]
+    pub layout: Option<PathBuf>,
+    /// Also check that this bundle's buffers fit the built-in layout's regions.
+    #[arg(long)]
+    pub bundle: Option<PathBuf>,
+}
+
+/// Print the map.
+///
+/// # Errors
+/// An unreadable or invalid layout, or a bundle that does not fit.
+pub fn run(args: &Args) -> Result<()> {
+    let text = match &args.layout {
+        Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
+        None => BUILT_IN_LAYOUT.to_owned(),
+    };
+    let layout = MemoryLayout::parse(&text)?;
+    print!("{}", layout.render_map());
+    if let Some(dir) = &args.bundle {
+        let bundle = Bundle::open(dir).with_context(|| dir.display().to_string())?;
+        check_regions(bundle.dims()).map_err(|e| {
+            crate::harness::HarnessError::from(e)
+        }).with_context(|| format!("bundle {}", dir.display()))?;
+        println!("bundle {}: every region fits", dir.display());
+    }
+    Ok(())
+}

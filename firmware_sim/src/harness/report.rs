@@ -1,0 +1,283 @@
+//! The replay report: per-stage and per-step latency percentiles against their budgets,
+//! deadline misses, arena peak against its budget, allocations per step after warm-up, the run
+//! digest and the map quality; as a text table and as JSON (serde).
+
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use super::stats::Percentiles;
+
+/// Steps excluded from the allocation and peak checks: the graph engine sizes its scratch
+/// buffers on the first runs.
+pub const WARMUP_STEPS: usize = 2;
+
+/// One timed quantity.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct StageReport {
+    /// Name (as in `[budgets.latency_us]`).
+    pub name: String,
+    /// Percentiles over all steps (nearest rank), microseconds.
+    #[serde(flatten)]
+    pub latency: Percentiles,
+    /// Budget, microseconds.
+    pub budget_us: u64,
+    /// Samples over the budget.
+    pub over_budget: usize,
+}
+
+/// One step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct StepRecord {
+    /// Frame sequence number.
+    pub sequence: u64,
+    /// Virtual-clock time of the frame, microseconds.
+    pub timestamp_us: u64,
+    /// Wall time of the step, microseconds.
+    pub latency_us: u64,
+    /// The step's map digest (xxh3-64 of the published elements).
+    pub digest: u64,
+    /// Allocations inside graph engine calls.
+    pub engine_allocations: usize,
+    /// Allocations during the step outside graph engine calls (the runtime's own).
+    pub outside_engine_allocations: usize,
+    /// Arena peak since start-up, after this step, bytes.
+    pub arena_peak_bytes: usize,
+    /// Arena bytes in use after this step.
+    pub arena_current_bytes: usize,
+    /// The step took longer than the step period.
+    pub deadline_miss: bool,
+    /// The satellite prior was missing or corrupt (camera-only map).
+    pub degraded: bool,
+}
+
+/// Arena figures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct ArenaReport {
+    /// Arena size, bytes (0: not running in the arena).
+    pub capacity_bytes: usize,
+    /// Peak use since start-up, bytes.
+    pub peak_bytes: usize,
+    /// `[budgets] peak_bytes`.
+    pub peak_budget_bytes: usize,
+    /// Bytes the graph engine holds after loading the bundle.
+    pub graph_engine_bytes: usize,
+    /// Bytes `SatMap::new` reserved (the runtime regions).
+    pub runtime_regions_bytes: usize,
+    /// Sum of the runtime-owned regions in `memory_layout.toml` (capacity).
+    pub layout_runtime_bytes: usize,
+}
+
+/// Allocation counts after warm-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct AllocationReport {
+    /// Steps counted (all but the warm-up steps).
+    pub steps: usize,
+    /// Largest number of allocations inside the graph engine in one step.
+    pub engine_max_per_step: usize,
+    /// Largest number of allocations outside the graph engine in one step.
+    pub outside_engine_max_per_step: usize,
+    /// Arena peak grew after warm-up (bytes of growth).
+    pub peak_growth_bytes: usize,
+}
+
+/// Map quality against the synthetic ground truth.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MapQuality {
+    /// Chamfer mAP over the drive.
+    pub mean_ap: f64,
+    /// AP per class, label order.
+    pub class_ap: Vec<(String, f64)>,
+    /// How to read the number.
+    pub note: String,
+}
+
+/// The whole report.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Report {
+    /// Bundle folder.
+    pub bundle: String,
+    /// Model config of the bundle.
+    pub config: String,
+    /// What was replayed.
+    pub scenario: String,
+    /// Steps run.
+    pub frames: usize,
+    /// Replay rate, Hz.
+    pub rate_hz: f64,
+    /// Step period (deadline), microseconds.
+    pub step_period_us: u64,
+    /// Machine and config the latency budgets are stated for.
+    pub budget_reference: String,
+    /// Per-stage and per-step latencies.
+    pub stages: Vec<StageReport>,
+    /// Steps longer than the step period.
+    pub deadline_misses: usize,
+    /// Stage samples over their budgets (all stages, the step excluded).
+    pub stage_budget_misses: usize,
+    /// Arena figures.
+    pub arena: ArenaReport,
+    /// Allocations after warm-up.
+    pub allocations: AllocationReport,
+    /// xxh3-64 of all step digests in order, hex.
+    pub run_digest: String,
+    /// Map quality (synthetic ground truth).
+    pub map_quality: Option<MapQuality>,
+    /// Budgets exceeded, one line each (empty: all met).
+    pub exceeded: Vec<String>,
+    /// Every step.
+    pub steps: Vec<StepRecord>,
+}
+
+impl Report {
+    /// Fill the verdicts (`allocations`, misses, `exceeded`) from the steps and stages.
+    pub fn judge(&mut self) {
+        let after = self.steps.get(WARMUP_STEPS..).unwrap_or(&[]);
+        let warm_peak =
+            self.steps.get(WARMUP_STEPS.saturating_sub(1)).map_or(0, |s| s.arena_peak_bytes);
+        self.allocations = AllocationReport {
+            steps: after.len(),
+            engine_max_per_step: after.iter().map(|s| s.engine_allocations).max().unwrap_or(0),
+            outside_engine_max_per_step: after
+                .iter()
+                .map(|s| s.outside_engine_allocations)
+                .max()
+                .unwrap_or(0),
+            peak_growth_bytes: after
+                .iter()
+                .map(|s| s.arena_peak_bytes.saturating_sub(warm_peak))
+                .max()
+                .unwrap_or(0),
+        };
+        self.deadline_misses = self.steps.iter().filter(|s| s.deadline_miss).count();
+        self.stage_budget_misses =
+            self.stages.iter().filter(|s| s.name != "step").map(|s| s.over_budget).sum();
+        let mut exceeded = Vec::new();
+        if self.arena.peak_bytes > self.arena.peak_budget_bytes {
+            exceeded.push(format!(
+                "arena peak {} bytes > budget {} bytes",
+                self.arena.peak_bytes, self.arena.peak_budget_bytes
+            ));
+        }
+        if self.deadline_misses > 0 {
+            exceeded.push(format!(
+                "{} of {} steps missed the {} us deadline",
+                self.deadline_misses,
+                self.steps.len(),
+                self.step_period_us
+            ));
+        }
+        for s in &self.stages {
+            if s.over_budget > 0 {
+                exceeded.push(format!(
+                    "{}: {} of {} samples over the {} us budget (max {} us)",
+                    s.name, s.over_budget, s.latency.count, s.budget_us, s.latency.max_us
+                ));
+            }
+        }
+        if self.allocations.outside_engine_max_per_step > 0 {
+            exceeded.push(format!(
+                "the runtime allocated outside the graph engine after warm-up (up to {} per step)",
+                self.allocations.outside_engine_max_per_step
+            ));
+        }
+        self.exceeded = exceeded;
+    }
+
+    /// True when every budget was met.
+    #[must_use]
+    pub fn within_budgets(&self) -> bool {
+        self.exceeded.is_empty()
+    }
+
+    /// The human-readable table.
+    #[must_use]
+    pub fn to_text(&self) -> String {
+        let mut s = String::new();
+        let mib = |b: usize| b as f64 / (1024.0 * 1024.0);
+        let ms = |us: u64| us as f64 / 1000.0;
+        let _ = writeln!(s, "satmap-sim drive: {} frames of {}", self.frames, self.scenario);
+        let _ = writeln!(s, "bundle {} (config `{}`)", self.bundle, self.config);
+        let _ = writeln!(
+            s,
+            "virtual clock {:.3} Hz (step period {:.1} ms); budgets for: {}",
+            self.rate_hz,
+            ms(self.step_period_us),
+            self.budget_reference
+        );
+        let _ = writeln!(s);
+        let _ = writeln!(
+            s,
+            "{:<18} {:>7} {:>10} {:>10} {:>10} {:>10} {:>6}",
+            "stage", "samples", "p50 ms", "p99 ms", "max ms", "budget ms", "over"
+        );
+        for st in &self.stages {
+            let _ = writeln!(
+                s,
+                "{:<18} {:>7} {:>10.2} {:>10.2} {:>10.2} {:>10.1} {:>6}",
+                st.name,
+                st.latency.count,
+                ms(st.latency.p50_us),
+                ms(st.latency.p99_us),
+                ms(st.latency.max_us),
+                ms(st.budget_us),
+                st.over_budget
+            );
+        }
+        let _ = writeln!(s);
+        let _ = writeln!(
+            s,
+            "deadline misses    {} of {} steps (stage budget misses {})",
+            self.deadline_misses,
+            self.steps.len(),
+            self.stage_budget_misses
+        );
+        let a = &self.arena;
+        let _ = writeln!(
+            s,
+            "arena peak         {} bytes ({:.1} MiB) of budget {} ({:.1} MiB), arena {} ({:.1} MiB)",
+            a.peak_bytes,
+            mib(a.peak_bytes),
+            a.peak_budget_bytes,
+            mib(a.peak_budget_bytes),
+            a.capacity_bytes,
+            mib(a.capacity_bytes)
+        );
+        let _ = writeln!(
+            s,
+            "  graph engine     {} bytes ({:.1} MiB) after loading the bundle",
+            a.graph_engine_bytes,
+            mib(a.graph_engine_bytes)
+        );
+        let _ = writeln!(
+            s,
+            "  runtime regions  {} bytes ({:.1} MiB) reserved by SatMap::new (layout capacity {})",
+            a.runtime_regions_bytes,
+            mib(a.runtime_regions_bytes),
+            a.layout_runtime_bytes
+        );
+        let al = &self.allocations;
+        let _ = writeln!(
+            s,
+            "allocations/step   after {WARMUP_STEPS} warm-up steps ({} steps): outside the graph \
+             engine max {}, inside max {}; arena peak growth {} bytes",
+            al.steps, al.outside_engine_max_per_step, al.engine_max_per_step, al.peak_growth_bytes
+        );
+        let _ = writeln!(s, "run digest         {}", self.run_digest);
+        if let Some(q) = &self.map_quality {
+            let classes: Vec<String> =
+                q.class_ap.iter().map(|(n, ap)| format!("{n} {ap:.3}")).collect();
+            let _ = writeln!(s, "map mAP            {:.4} ({})", q.mean_ap, classes.join(", "));
+            let _ = writeln!(s, "                   {}", q.note);
+        }
+        if self.exceeded.is_empty() {
+            let _ = writeln!(s, "verdict            all budgets met");
+        } else {
+            let _ = writeln!(s, "verdict            BUDGET EXCEEDED");
+            for e in &self.exceeded {
+                let _ = writeln!(s, "  - {e}");
+            }
+        }
+        s
+    }
+}
