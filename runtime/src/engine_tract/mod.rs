@@ -13,7 +13,7 @@
 //! matmuls across threads; tract's kernels partition output tiles, not reductions, so results
 //! stay bit-identical, but we have measured only a 1.24x gain on 2 cores and keep it off.
 
-use std::rc::Rc;
+use std::sync::Arc;
 
 use tract_onnx::prelude::*;
 
@@ -25,8 +25,10 @@ use crate::model_dims::ModelDims;
 struct StageRunner {
     stage: Stage,
     state: TypedSimpleState,
-    inputs: Vec<Rc<Tensor>>,
+    inputs: Vec<Arc<Tensor>>,
     output_lens: Vec<usize>,
+    /// tract's message of the last failed run (the core error carries only a code).
+    last_error: Option<String>,
 }
 
 impl StageRunner {
@@ -52,7 +54,7 @@ impl StageRunner {
         let inputs = entry
             .inputs
             .iter()
-            .map(|spec| Tensor::zero_dt(datum(spec.dtype), &spec.shape).map(Rc::new))
+            .map(|spec| Tensor::zero_dt(datum(spec.dtype), &spec.shape).map(Arc::new))
             .collect::<TractResult<Vec<_>>>()
             .map_err(engine_err)?;
         let output_lens = entry.outputs.iter().map(|s| s.shape.iter().product()).collect();
@@ -61,6 +63,7 @@ impl StageRunner {
             state,
             inputs,
             output_lens,
+            last_error: None,
         })
     }
 
@@ -71,26 +74,25 @@ impl StageRunner {
         }
     }
 
-    /// Mutable view of input `ix` as `T`. The state drops its references to the inputs at the
+    /// Copy `src` into input `ix` (as `T`). The state drops its references to the inputs at the
     /// end of every run, so the tensor is uniquely owned here.
-    fn input_mut<T: Datum>(&mut self, ix: usize) -> Result<&mut [T], EngineError> {
-        let stage = self.stage;
-        let err = EngineError {
-            stage,
-            kind: EngineErrorKind::ShapeMismatch,
-        };
-        let tensor = self.inputs.get_mut(ix).ok_or(err)?;
-        let tensor = Rc::get_mut(tensor).ok_or(EngineError {
-            stage,
-            kind: EngineErrorKind::Backend(BACKEND_INPUT_SHARED),
-        })?;
-        tensor.as_slice_mut::<T>().map_err(|_| err)
-    }
-
     fn write_input<T: Datum + Copy>(&mut self, ix: usize, src: &[T]) -> Result<(), EngineError> {
-        let dst = self.input_mut::<T>(ix)?;
+        let stage = self.stage;
+        let err = |kind| EngineError { stage, kind };
+        let tensor = self
+            .inputs
+            .get_mut(ix)
+            .ok_or(err(EngineErrorKind::Backend(BACKEND_NO_SUCH_INPUT)))?;
+        let tensor =
+            Arc::get_mut(tensor).ok_or(err(EngineErrorKind::Backend(BACKEND_INPUT_SHARED)))?;
+        let mut view = tensor
+            .try_as_plain_ram_mut()
+            .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
+        let dst = view
+            .as_slice_mut::<T>()
+            .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
         if dst.len() != src.len() {
-            return Err(self.err(EngineErrorKind::ShapeMismatch));
+            return Err(err(EngineErrorKind::ShapeMismatch { expected: dst.len(), got: src.len() }));
         }
         dst.copy_from_slice(src);
         Ok(())
@@ -98,25 +100,38 @@ impl StageRunner {
 
     /// Run the stage and copy each f32 output into the matching buffer of `outs`.
     fn run(&mut self, outs: &mut [&mut [f32]]) -> Result<(), EngineError> {
-        if outs.len() != self.output_lens.len()
-            || outs.iter().zip(&self.output_lens).any(|(o, &n)| o.len() != n)
-        {
-            return Err(self.err(EngineErrorKind::ShapeMismatch));
+        if outs.len() != self.output_lens.len() {
+            return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
         }
-        let inputs: TVec<TValue> = self.inputs.iter().map(|t| TValue::Var(Rc::clone(t))).collect();
-        let results = self
-            .state
-            .run(inputs)
-            .map_err(|_| self.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)))?;
+        for (out, &n) in outs.iter().zip(&self.output_lens) {
+            if out.len() != n {
+                return Err(self.err(EngineErrorKind::ShapeMismatch {
+                    expected: n,
+                    got: out.len(),
+                }));
+            }
+        }
+        let inputs: TVec<TValue> = self.inputs.iter().map(|t| TValue::from_const(Arc::clone(t))).collect();
+        let results = match self.state.run(inputs) {
+            Ok(results) => results,
+            Err(e) => {
+                self.last_error = Some(format!("{e:#}"));
+                return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)));
+            }
+        };
         if results.len() != outs.len() {
-            return Err(self.err(EngineErrorKind::ShapeMismatch));
+            return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
         }
         for (value, out) in results.iter().zip(outs.iter_mut()) {
             let src = value
-                .as_slice::<f32>()
-                .map_err(|_| self.err(EngineErrorKind::ShapeMismatch))?;
+                .try_as_plain_ram()
+                .and_then(|v| v.as_slice::<f32>())
+                .map_err(|_| self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_DTYPE)))?;
             if src.len() != out.len() {
-                return Err(self.err(EngineErrorKind::ShapeMismatch));
+                return Err(self.err(EngineErrorKind::ShapeMismatch {
+                    expected: out.len(),
+                    got: src.len(),
+                }));
             }
             out.copy_from_slice(src);
         }
@@ -128,6 +143,14 @@ impl StageRunner {
 pub const BACKEND_INPUT_SHARED: u32 = 1;
 /// Backend code: tract returned an error while running the plan.
 pub const BACKEND_RUN_FAILED: u32 = 2;
+/// Backend code: the stage has fewer inputs than the runtime writes.
+pub const BACKEND_NO_SUCH_INPUT: u32 = 3;
+/// Backend code: an input tensor's element type differs from the runtime buffer's.
+pub const BACKEND_INPUT_DTYPE: u32 = 4;
+/// Backend code: the stage produced a different number of outputs than the manifest declares.
+pub const BACKEND_OUTPUT_COUNT: u32 = 5;
+/// Backend code: an output is not f32.
+pub const BACKEND_OUTPUT_DTYPE: u32 = 6;
 
 fn datum(dtype: DType) -> DatumType {
     match dtype {
@@ -215,6 +238,12 @@ impl TractEngine {
         Self::load(&Bundle::open(dir)?)
     }
 
+    /// tract's message for the last failed run of `stage`, if any.
+    #[must_use]
+    pub fn last_error(&self, stage: Stage) -> Option<&str> {
+        self.runners.get(stage as usize)?.last_error.as_deref()
+    }
+
     fn runner(&mut self, stage: Stage) -> &mut StageRunner {
         // Stage::ALL order is the load order, so the index is the stage's position.
         &mut self.runners[stage as usize]
@@ -234,7 +263,8 @@ impl Engine for TractEngine {
     ) -> Result<(), EngineError> {
         let r = self.runner(Stage::ImageEncoder);
         r.write_input(0, image_rgb)?;
-        let index = i64::try_from(camera).map_err(|_| r.err(EngineErrorKind::ShapeMismatch))?;
+        let index =
+            i64::try_from(camera).map_err(|_| r.err(EngineErrorKind::CameraIndex { camera }))?;
         r.write_input(1, &[index])?;
         r.run(&mut [value_out])
     }
