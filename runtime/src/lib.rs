@@ -31,6 +31,10 @@ pub mod step;
 #[cfg(test)]
 mod test_support;
 
+// Crates whose types appear in the public API (`MapFrame` points, `MapFrame::elements`).
+pub use glam;
+pub use heapless;
+
 pub use calibration::Calibration;
 pub use engine::{Engine, EngineError, EngineErrorKind, Stage};
 pub use error::{InitError, StepError};
