@@ -1,0 +1,60 @@
+//! Native GKT gather-sum and look-up-table build, for the `test` and paper shapes, with the
+//! table built from the committed nuScenes-like calibration.
+//!
+//! Run: `cargo bench -p satmap-runtime --no-default-features --features std --bench gkt_kernel`.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use satmap_runtime::ModelDims;
+use satmap_runtime::calibration::from_toml_str;
+use satmap_runtime::gkt::{Lut, gather_sum};
+
+const RIG: &str = include_str!("../../models/calibration/nuscenes_like.toml");
+
+fn noise(len: usize, seed: u32) -> Vec<f32> {
+    let mut s = seed | 1;
+    (0..len)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            (s >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        })
+        .collect()
+}
+
+fn bench(c: &mut Criterion) {
+    let calibration = from_toml_str(RIG).expect("committed calibration parses");
+    for (name, dims) in [
+        ("test", ModelDims::test_config()),
+        ("paper", ModelDims::paper_config()),
+    ] {
+        let lut = Lut::new(&dims, &calibration).expect("LUT builds");
+        let values = noise(6 * dims.value_len(), 1);
+        let weights = noise(dims.weights_len(), 2);
+        let mut out = vec![0.0f32; dims.bev_len()];
+        c.bench_function(&format!("gather_sum/{name}"), |b| {
+            b.iter(|| {
+                gather_sum(&lut, black_box(&values), black_box(&weights), &mut out)
+                    .expect("sizes match");
+                black_box(&out);
+            });
+        });
+        let mut lut = lut;
+        c.bench_function(&format!("lut_rebuild/{name}"), |b| {
+            b.iter(|| {
+                lut.rebuild(black_box(&calibration))
+                    .expect("valid calibration")
+            });
+        });
+        eprintln!(
+            "{name}: {} (camera, query) entries for {} queries",
+            lut.len(),
+            dims.num_queries()
+        );
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
