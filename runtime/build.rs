@@ -22,7 +22,8 @@ fn main() {
             std::process::exit(1);
         }
     };
-    let out = PathBuf::from(std::env::var_os("OUT_DIR").unwrap_or_default()).join("memory_layout.rs");
+    let out =
+        PathBuf::from(std::env::var_os("OUT_DIR").unwrap_or_default()).join("memory_layout.rs");
     if let Err(e) = std::fs::write(&out, layout.to_rust_consts()) {
         eprintln!("ERROR(layout): cannot write {}: {e}", out.display());
         std::process::exit(1);

@@ -8,7 +8,10 @@ use satmap_sim::harness::{ReplayConfig, ScenarioInput, replay};
 fn config(seed: u64) -> ReplayConfig {
     ReplayConfig {
         bundle_dir: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/bundles/test"),
-        scenario: ScenarioInput::Synthetic { seed, speed_mps: 8.0 },
+        scenario: ScenarioInput::Synthetic {
+            seed,
+            speed_mps: 8.0,
+        },
         frames: 3,
         rate_hz: 1.0,
         show_progress: false,

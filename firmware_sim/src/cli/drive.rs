@@ -102,7 +102,10 @@ pub fn run(
         bundle_dir: args.bundle.clone(),
         scenario: match &args.scenario {
             Some(dir) => ScenarioInput::Folder(dir.clone()),
-            None => ScenarioInput::Synthetic { seed: args.seed, speed_mps: args.speed_mps },
+            None => ScenarioInput::Synthetic {
+                seed: args.seed,
+                speed_mps: args.speed_mps,
+            },
         },
         frames: args.frames,
         rate_hz,
@@ -136,10 +139,18 @@ fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {
         let p = out.join(name);
         std::fs::write(&p, bytes).with_context(|| p.display().to_string())
     };
-    write("report.json", serde_json::to_string_pretty(&outcome.report)?.as_bytes())?;
+    write(
+        "report.json",
+        serde_json::to_string_pretty(&outcome.report)?.as_bytes(),
+    )?;
     write("report.txt", outcome.report.to_text().as_bytes())?;
     if let Some(last) = &outcome.last {
-        let pic = render_frame(&last.crop_rgb, &last.crop_spec, &last.predictions, &last.ground_truth);
+        let pic = render_frame(
+            &last.crop_rgb,
+            &last.crop_spec,
+            &last.predictions,
+            &last.ground_truth,
+        );
         let p = out.join("map.png");
         pic.save(&p).with_context(|| p.display().to_string())?;
         let sheet = camera_sheet(&last.images, last.image_w_px, last.image_h_px);
@@ -148,7 +159,9 @@ fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {
     }
     write(
         "predictions.geojson",
-        route_frame_geojson(outcome.features.clone()).to_string().as_bytes(),
+        route_frame_geojson(outcome.features.clone())
+            .to_string()
+            .as_bytes(),
     )?;
     Ok(())
 }

@@ -36,9 +36,9 @@ pub fn run(args: &Args) -> Result<()> {
     print!("{}", layout.render_map());
     if let Some(dir) = &args.bundle {
         let bundle = Bundle::open(dir).with_context(|| dir.display().to_string())?;
-        check_regions(bundle.dims()).map_err(|e| {
-            crate::harness::HarnessError::from(e)
-        }).with_context(|| format!("bundle {}", dir.display()))?;
+        check_regions(bundle.dims())
+            .map_err(crate::harness::HarnessError::from)
+            .with_context(|| format!("bundle {}", dir.display()))?;
         println!("bundle {}: every region fits", dir.display());
     }
     Ok(())

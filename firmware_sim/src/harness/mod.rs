@@ -108,9 +108,15 @@ pub enum HarnessError {
 impl From<InitError> for HarnessError {
     fn from(e: InitError) -> Self {
         match e {
-            InitError::RegionTooSmall { region, needed_bytes, capacity_bytes } => {
-                Self::RegionTooSmall { region, needed_bytes, capacity_bytes }
-            }
+            InitError::RegionTooSmall {
+                region,
+                needed_bytes,
+                capacity_bytes,
+            } => Self::RegionTooSmall {
+                region,
+                needed_bytes,
+                capacity_bytes,
+            },
             e => Self::Init(e),
         }
     }
@@ -213,10 +219,16 @@ impl Source {
                         "frame {k}: images do not match the bundle's size"
                     )));
                 }
-                Ok(SensorFrame { world_pose: pose, motion, ground_truth: d.ground_truth_at(&pose) })
+                Ok(SensorFrame {
+                    world_pose: pose,
+                    motion,
+                    ground_truth: d.ground_truth_at(&pose),
+                })
             }
             Self::Folder(s) => {
-                let f = s.read_frame(k).map_err(|e| HarnessError::Scenario(e.to_string()))?;
+                let f = s
+                    .read_frame(k)
+                    .map_err(|e| HarnessError::Scenario(e.to_string()))?;
                 if f.images.len() != images.len() {
                     return Err(HarnessError::Scenario(format!(
                         "frame {k}: {} image bytes, the bundle needs {}",
@@ -225,7 +237,11 @@ impl Source {
                     )));
                 }
                 images.copy_from_slice(&f.images);
-                Ok(SensorFrame { world_pose: f.pose, motion: f.motion, ground_truth: f.ground_truth })
+                Ok(SensorFrame {
+                    world_pose: f.pose,
+                    motion: f.motion,
+                    ground_truth: f.ground_truth,
+                })
             }
         }
     }
@@ -234,7 +250,12 @@ impl Source {
 fn corridor_options() -> BuildOptions {
     // The crop (60 m x 30 m, rotated with the heading) reaches 34 m from the ego; the corridor
     // covers 40 m either side.
-    BuildOptions { corridor_width_m: 80.0, gsd_m: 0.15, tile_size_px: 256, ..BuildOptions::default() }
+    BuildOptions {
+        corridor_width_m: 80.0,
+        gsd_m: 0.15,
+        tile_size_px: 256,
+        ..BuildOptions::default()
+    }
 }
 
 /// Generate or open the scenario and build its route pack (host side).
@@ -263,20 +284,23 @@ fn open_scenario(
             let route = parse_route_geojson(&route_geojson(&drive, anchor), Path::new("<drive>"))
                 .map_err(|e| pack(&e))?;
             let mut imagery = RasterImagery::new(drive.satellite(), anchor);
-            let built = build_pack(&mut imagery, &route, &corridor_options()).map_err(|e| pack(&e))?;
+            let built =
+                build_pack(&mut imagery, &route, &corridor_options()).map_err(|e| pack(&e))?;
             Ok((Source::Synthetic(Box::new(drive)), anchor, built.bytes))
         }
         ScenarioInput::Folder(dir) => {
             let s = Scenario::open(dir).map_err(|e| scen(&e))?;
-            if s.manifest.image_width_px != image_w_px || s.manifest.image_height_px != image_h_px
-            {
+            if s.manifest.image_width_px != image_w_px || s.manifest.image_height_px != image_h_px {
                 return Err(HarnessError::Scenario(format!(
                     "images are {}x{}, the bundle needs {image_w_px}x{image_h_px}",
                     s.manifest.image_width_px, s.manifest.image_height_px
                 )));
             }
-            let anchor =
-                Geodetic::new(s.manifest.anchor_lat_deg, s.manifest.anchor_lon_deg, s.manifest.anchor_height_m);
+            let anchor = Geodetic::new(
+                s.manifest.anchor_lat_deg,
+                s.manifest.anchor_lon_deg,
+                s.manifest.anchor_height_m,
+            );
             let bytes = if let Some(p) = &s.manifest.route_pack {
                 let path = dir.join(p);
                 std::fs::read(&path).map_err(|e| pack(&format!("{}: {e}", path.display())))?
@@ -285,9 +309,12 @@ fn open_scenario(
                 let text = std::fs::read_to_string(&route_path)
                     .map_err(|e| pack(&format!("{}: {e}", route_path.display())))?;
                 let route = parse_route_geojson(&text, &route_path).map_err(|e| pack(&e))?;
-                let mut tiles = SlippyTiles::open(&dir.join(&s.manifest.tiles_dir), Some(s.manifest.tile_zoom))
-                    .map_err(|e| pack(&e))?;
-                build_pack(&mut tiles, &route, &corridor_options()).map_err(|e| pack(&e))?.bytes
+                let mut tiles =
+                    SlippyTiles::open(&dir.join(&s.manifest.tiles_dir), Some(s.manifest.tile_zoom))
+                        .map_err(|e| pack(&e))?;
+                build_pack(&mut tiles, &route, &corridor_options())
+                    .map_err(|e| pack(&e))?
+                    .bytes
             };
             Ok((Source::Folder(Box::new(s)), anchor, bytes))
         }
@@ -317,7 +344,11 @@ fn to_vectors(map: &MapFrame) -> Vec<MapVector> {
         .filter_map(|e| {
             Some(MapVector {
                 class: MapClass::from_index(e.class as usize)?,
-                points_m: e.points_m.iter().map(|p| [f64::from(p.x), f64::from(p.y)]).collect(),
+                points_m: e
+                    .points_m
+                    .iter()
+                    .map(|p| [f64::from(p.x), f64::from(p.y)])
+                    .collect(),
                 score: f64::from(e.score),
             })
         })
@@ -329,9 +360,14 @@ fn to_vectors(map: &MapFrame) -> Vec<MapVector> {
 ///
 /// # Errors
 /// Bad bundle, scenario or pack, a region that does not fit, or a failed step.
-pub fn replay(cfg: &ReplayConfig, alloc: Option<&'static ArenaAllocator>) -> Result<Replay, HarnessError> {
+pub fn replay(
+    cfg: &ReplayConfig,
+    alloc: Option<&'static ArenaAllocator>,
+) -> Result<Replay, HarnessError> {
     if !(cfg.rate_hz > 0.0 && cfg.rate_hz.is_finite()) || cfg.frames == 0 {
-        return Err(HarnessError::Settings("rate must be positive and frames at least 1".into()));
+        return Err(HarnessError::Settings(
+            "rate must be positive and frames at least 1".into(),
+        ));
     }
     let period_us = (1e6 / cfg.rate_hz).round() as u64;
     // Host side: the bundle manifest, the scenario, the route pack (flash on the vehicle).
@@ -427,10 +463,15 @@ pub fn replay(cfg: &ReplayConfig, alloc: Option<&'static ArenaAllocator>) -> Res
         let result = satmap.step(&frame).map(|m| (m.digest, m.health.degraded));
         let latency_us = micros_since(t);
         let after = stats_of(alloc);
-        let (map_digest, degraded) =
-            result.map_err(|error| HarnessError::Step { sequence: frame.sequence, error })?;
+        let (map_digest, degraded) = result.map_err(|error| HarnessError::Step {
+            sequence: frame.sequence,
+            error,
+        })?;
         let engine_allocations = satmap.engine_mut().timings_mut().take_engine_allocations();
-        satmap.engine_mut().timings_mut().record(Timed::Step, latency_us);
+        satmap
+            .engine_mut()
+            .timings_mut()
+            .record(Timed::Step, latency_us);
         let deadline_miss = latency_us > period_us;
         if deadline_miss {
             satmap.mark_deadline_overrun();
@@ -454,7 +495,11 @@ pub fn replay(cfg: &ReplayConfig, alloc: Option<&'static ArenaAllocator>) -> Res
             let name = frame_dir_name(k);
             if let Some(map) = satmap.last_map() {
                 let preds = to_vectors(map);
-                features.extend(crate::render::frame_features(&sensor.world_pose, &preds, k as u32));
+                features.extend(crate::render::frame_features(
+                    &sensor.world_pose,
+                    &preds,
+                    k as u32,
+                ));
                 if k + 1 == frames {
                     last = Some(LastStep {
                         crop_rgb: satmap.crop().to_vec(),
@@ -482,7 +527,10 @@ pub fn replay(cfg: &ReplayConfig, alloc: Option<&'static ArenaAllocator>) -> Res
         let crop_samples = crop_series.samples_us().to_vec();
         let timings = satmap.engine_mut().timings();
         let budget = |name: &str| {
-            layout::LATENCY_BUDGETS_US.iter().find(|(n, _)| *n == name).map_or(u64::MAX, |b| b.1)
+            layout::LATENCY_BUDGETS_US
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map_or(u64::MAX, |b| b.1)
         };
         let stages = Timed::ALL
             .iter()
@@ -505,7 +553,11 @@ pub fn replay(cfg: &ReplayConfig, alloc: Option<&'static ArenaAllocator>) -> Res
         let eval = evaluate(&predictions, &truth);
         let map_quality = Some(MapQuality {
             mean_ap: eval.mean_ap,
-            class_ap: eval.classes.iter().map(|c| (c.class.name().to_owned(), c.ap)).collect(),
+            class_ap: eval
+                .classes
+                .iter()
+                .map(|c| (c.class.name().to_owned(), c.ap))
+                .collect(),
             note: "the bundle's weights are random (untrained), so this mAP is expected to be \
                    near 0; it shows the evaluation runs end to end, not model quality"
                 .to_owned(),
@@ -549,7 +601,11 @@ pub fn replay(cfg: &ReplayConfig, alloc: Option<&'static ArenaAllocator>) -> Res
         report.judge();
         report
     });
-    Ok(Replay { report, last, features })
+    Ok(Replay {
+        report,
+        last,
+        features,
+    })
 }
 
 /// The `[model] config` name of a bundle's manifest (`test`, `nano`, `paper`), or `?`.

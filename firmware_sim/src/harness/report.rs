@@ -133,11 +133,17 @@ impl Report {
     /// Fill the verdicts (`allocations`, misses, `exceeded`) from the steps and stages.
     pub fn judge(&mut self) {
         let after = self.steps.get(WARMUP_STEPS..).unwrap_or(&[]);
-        let warm_peak =
-            self.steps.get(WARMUP_STEPS.saturating_sub(1)).map_or(0, |s| s.arena_peak_bytes);
+        let warm_peak = self
+            .steps
+            .get(WARMUP_STEPS.saturating_sub(1))
+            .map_or(0, |s| s.arena_peak_bytes);
         self.allocations = AllocationReport {
             steps: after.len(),
-            engine_max_per_step: after.iter().map(|s| s.engine_allocations).max().unwrap_or(0),
+            engine_max_per_step: after
+                .iter()
+                .map(|s| s.engine_allocations)
+                .max()
+                .unwrap_or(0),
             outside_engine_max_per_step: after
                 .iter()
                 .map(|s| s.outside_engine_allocations)
@@ -150,8 +156,12 @@ impl Report {
                 .unwrap_or(0),
         };
         self.deadline_misses = self.steps.iter().filter(|s| s.deadline_miss).count();
-        self.stage_budget_misses =
-            self.stages.iter().filter(|s| s.name != "step").map(|s| s.over_budget).sum();
+        self.stage_budget_misses = self
+            .stages
+            .iter()
+            .filter(|s| s.name != "step")
+            .map(|s| s.over_budget)
+            .sum();
         let mut exceeded = Vec::new();
         if self.arena.peak_bytes > self.arena.peak_budget_bytes {
             exceeded.push(format!(
@@ -196,7 +206,11 @@ impl Report {
         let mut s = String::new();
         let mib = |b: usize| b as f64 / (1024.0 * 1024.0);
         let ms = |us: u64| us as f64 / 1000.0;
-        let _ = writeln!(s, "satmap-sim drive: {} frames of {}", self.frames, self.scenario);
+        let _ = writeln!(
+            s,
+            "satmap-sim drive: {} frames of {}",
+            self.frames, self.scenario
+        );
         let _ = writeln!(s, "bundle {} (config `{}`)", self.bundle, self.config);
         let _ = writeln!(
             s,
@@ -265,9 +279,17 @@ impl Report {
         );
         let _ = writeln!(s, "run digest         {}", self.run_digest);
         if let Some(q) = &self.map_quality {
-            let classes: Vec<String> =
-                q.class_ap.iter().map(|(n, ap)| format!("{n} {ap:.3}")).collect();
-            let _ = writeln!(s, "map mAP            {:.4} ({})", q.mean_ap, classes.join(", "));
+            let classes: Vec<String> = q
+                .class_ap
+                .iter()
+                .map(|(n, ap)| format!("{n} {ap:.3}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "map mAP            {:.4} ({})",
+                q.mean_ap,
+                classes.join(", ")
+            );
             let _ = writeln!(s, "                   {}", q.note);
         }
         if self.exceeded.is_empty() {

@@ -107,6 +107,9 @@ mod tests {
 
     #[test]
     fn empty_series_is_zero() {
-        assert_eq!(Series::with_capacity(0).percentiles(), Percentiles::default());
+        assert_eq!(
+            Series::with_capacity(0).percentiles(),
+            Percentiles::default()
+        );
     }
 }

@@ -79,9 +79,16 @@ impl Timings {
     #[must_use]
     pub fn with_steps(steps: usize) -> Self {
         let series = Timed::ALL.map(|t| {
-            Series::with_capacity(if t == Timed::ImageEncoder { steps * 6 } else { steps })
+            Series::with_capacity(if t == Timed::ImageEncoder {
+                steps * 6
+            } else {
+                steps
+            })
         });
-        Self { series, engine_allocations: 0 }
+        Self {
+            series,
+            engine_allocations: 0,
+        }
     }
 
     /// Record one sample of `what`.
@@ -114,7 +121,12 @@ impl<E: Engine> TimedEngine<E> {
     /// Wrap `inner`; `alloc` (when the arena allocator is the global allocator) counts the
     /// allocations inside engine calls.
     pub fn new(inner: E, steps: usize, alloc: Option<&'static ArenaAllocator>) -> Self {
-        Self { inner, timings: Timings::with_steps(steps), alloc, images_done: None }
+        Self {
+            inner,
+            timings: Timings::with_steps(steps),
+            alloc,
+            images_done: None,
+        }
     }
 
     /// The timings so far.
@@ -155,7 +167,9 @@ impl<E: Engine> Engine for TimedEngine<E> {
         image_rgb: &[u8],
         value_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        let r = self.timed(Timed::ImageEncoder, |e| e.encode_image(camera, image_rgb, value_out));
+        let r = self.timed(Timed::ImageEncoder, |e| {
+            e.encode_image(camera, image_rgb, value_out)
+        });
         self.images_done = Some(Instant::now());
         r
     }
@@ -167,7 +181,9 @@ impl<E: Engine> Engine for TimedEngine<E> {
         gkt_weights_out: &mut [f32],
     ) -> Result<(), EngineError> {
         self.images_done = None;
-        self.timed(Timed::BevQuery, |e| e.bev_query(can_bus, query_out, gkt_weights_out))
+        self.timed(Timed::BevQuery, |e| {
+            e.bev_query(can_bus, query_out, gkt_weights_out)
+        })
     }
 
     fn bev_encode(
@@ -179,7 +195,9 @@ impl<E: Engine> Engine for TimedEngine<E> {
         if let Some(t) = self.images_done.take() {
             self.timings.record(Timed::GktGather, micros_since(t));
         }
-        self.timed(Timed::BevEncoder, |e| e.bev_encode(query, gathered, camera_bev_out))
+        self.timed(Timed::BevEncoder, |e| {
+            e.bev_encode(query, gathered, camera_bev_out)
+        })
     }
 
     fn encode_satellite(
@@ -187,7 +205,9 @@ impl<E: Engine> Engine for TimedEngine<E> {
         crop_rgb: &[u8],
         satellite_bev_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        self.timed(Timed::SatelliteEncoder, |e| e.encode_satellite(crop_rgb, satellite_bev_out))
+        self.timed(Timed::SatelliteEncoder, |e| {
+            e.encode_satellite(crop_rgb, satellite_bev_out)
+        })
     }
 
     fn decode_map(

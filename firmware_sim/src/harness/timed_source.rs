@@ -19,7 +19,10 @@ pub struct TimedSource<S: SatelliteSource> {
 impl<S: SatelliteSource> TimedSource<S> {
     /// Wrap `inner` with room for `steps` samples.
     pub fn new(inner: S, steps: usize) -> Self {
-        Self { inner, crop_us: Series::with_capacity(steps) }
+        Self {
+            inner,
+            crop_us: Series::with_capacity(steps),
+        }
     }
 }
 

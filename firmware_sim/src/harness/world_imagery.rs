@@ -7,8 +7,8 @@
 use glam::{DVec2, DVec3};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 
-use crate::route_pack_builder::imagery::{Gap, Imagery};
 use crate::route_pack_builder::BuildError;
+use crate::route_pack_builder::imagery::{Gap, Imagery};
 use crate::synth::ground_raster::GroundRaster;
 
 /// The raster of a synthetic world, anchored at a WGS84 point.
@@ -21,7 +21,10 @@ impl<'a> RasterImagery<'a> {
     /// `raster` (route-frame metres) with its route frame's origin at `anchor`.
     #[must_use]
     pub fn new(raster: &'a GroundRaster, anchor: Geodetic) -> Self {
-        Self { raster, frame: EnuFrame::new(anchor) }
+        Self {
+            raster,
+            frame: EnuFrame::new(anchor),
+        }
     }
 
     /// WGS84 of a route-frame point.
@@ -33,7 +36,9 @@ impl<'a> RasterImagery<'a> {
 
 impl Imagery for RasterImagery<'_> {
     fn project(&self, lat_deg: f64, lon_deg: f64) -> DVec2 {
-        self.frame.geodetic_to_enu(&Geodetic::new(lat_deg, lon_deg, 0.0)).truncate()
+        self.frame
+            .geodetic_to_enu(&Geodetic::new(lat_deg, lon_deg, 0.0))
+            .truncate()
     }
 
     fn sample(&mut self, p: DVec2) -> Result<Result<[u8; 3], Gap>, BuildError> {

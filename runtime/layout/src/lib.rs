@@ -142,7 +142,9 @@ pub enum LayoutError {
         computed: usize,
     },
     /// A record region has no `elem_bytes` (or a non-record has one).
-    #[error("ERROR(layout): region `{0}`: `elem_bytes` is required for dtype \"record\" and only for it")]
+    #[error(
+        "ERROR(layout): region `{0}`: `elem_bytes` is required for dtype \"record\" and only for it"
+    )]
     ElemBytes(String),
     /// A region the runtime needs is missing.
     #[error("ERROR(layout): region `{0}` is missing; the runtime needs it")]
@@ -151,7 +153,9 @@ pub enum LayoutError {
     #[error("ERROR(layout): [budgets.latency_us] has no `{0}`")]
     MissingBudget(&'static str),
     /// The step period is zero (the replay clock would not advance).
-    #[error("ERROR(layout): [budgets] step_period_us is 0; give the deadline of one step in microseconds")]
+    #[error(
+        "ERROR(layout): [budgets] step_period_us is 0; give the deadline of one step in microseconds"
+    )]
     ZeroStepPeriod,
     /// The peak budget is larger than the arena, so it could never be checked.
     #[error(
@@ -311,12 +315,18 @@ impl MemoryLayout {
     /// arena sizes and the budgets: what `runtime/build.rs` writes to `OUT_DIR`.
     #[must_use]
     pub fn to_rust_consts(&self) -> String {
-        let mut s = String::from("// Generated from memory_layout.toml by runtime/build.rs. Edit the TOML.\n");
+        let mut s = String::from(
+            "// Generated from memory_layout.toml by runtime/build.rs. Edit the TOML.\n",
+        );
         let _ = writeln!(s, "/// Model configuration the capacities are sized for.");
         let _ = writeln!(s, "pub const SIZED_FOR: &str = {:?};", self.sized_for);
         for (name, r) in &self.region {
             let upper = name.to_uppercase();
-            let _ = writeln!(s, "/// `{name}`: {} (capacity, bytes).", r.doc.replace('\n', " "));
+            let _ = writeln!(
+                s,
+                "/// `{name}`: {} (capacity, bytes).",
+                r.doc.replace('\n', " ")
+            );
             let _ = writeln!(s, "pub const {upper}_BYTES: usize = {};", r.bytes);
             if let Some(elem) = r.elem_bytes {
                 let _ = writeln!(s, "/// `{name}`: bytes of one record.");
@@ -339,14 +349,33 @@ impl MemoryLayout {
             self.arena.graph_engine_bytes
         );
         let _ = writeln!(s, "/// Peak arena budget, bytes.");
-        let _ = writeln!(s, "pub const PEAK_BUDGET_BYTES: usize = {};", self.budgets.peak_bytes);
+        let _ = writeln!(
+            s,
+            "pub const PEAK_BUDGET_BYTES: usize = {};",
+            self.budgets.peak_bytes
+        );
         let _ = writeln!(s, "/// Step period (deadline), microseconds.");
-        let _ = writeln!(s, "pub const STEP_PERIOD_US: u64 = {};", self.budgets.step_period_us);
-        let _ = writeln!(s, "/// Machine and configuration the latency budgets are stated for.");
-        let _ = writeln!(s, "pub const BUDGET_REFERENCE: &str = {:?};", self.budgets.reference);
+        let _ = writeln!(
+            s,
+            "pub const STEP_PERIOD_US: u64 = {};",
+            self.budgets.step_period_us
+        );
+        let _ = writeln!(
+            s,
+            "/// Machine and configuration the latency budgets are stated for."
+        );
+        let _ = writeln!(
+            s,
+            "pub const BUDGET_REFERENCE: &str = {:?};",
+            self.budgets.reference
+        );
         for (name, us) in &self.budgets.latency_us {
             let _ = writeln!(s, "/// Latency budget of `{name}`, microseconds.");
-            let _ = writeln!(s, "pub const {}_BUDGET_US: u64 = {us};", name.to_uppercase());
+            let _ = writeln!(
+                s,
+                "pub const {}_BUDGET_US: u64 = {us};",
+                name.to_uppercase()
+            );
         }
         let _ = writeln!(s, "/// Every latency budget as (name, microseconds).");
         let _ = writeln!(
@@ -398,7 +427,11 @@ impl MemoryLayout {
         let regions = self.runtime_bytes();
         let used = regions + self.arena.graph_engine_bytes;
         let _ = writeln!(s, "{:-<100}", "");
-        let _ = writeln!(s, "runtime regions      {regions:>12} bytes ({:.2} MiB)", mib(regions));
+        let _ = writeln!(
+            s,
+            "runtime regions      {regions:>12} bytes ({:.2} MiB)",
+            mib(regions)
+        );
         let _ = writeln!(
             s,
             "graph engine         {:>12} bytes ({:.2} MiB)",
@@ -411,9 +444,14 @@ impl MemoryLayout {
             self.arena.bytes,
             mib(self.arena.bytes),
             self.arena.bytes - used.min(self.arena.bytes),
-            100.0 * (self.arena.bytes - used.min(self.arena.bytes)) as f64 / self.arena.bytes.max(1) as f64
+            100.0 * (self.arena.bytes - used.min(self.arena.bytes)) as f64
+                / self.arena.bytes.max(1) as f64
         );
-        let _ = writeln!(s, "peak budget          {:>12} bytes", self.budgets.peak_bytes);
+        let _ = writeln!(
+            s,
+            "peak budget          {:>12} bytes",
+            self.budgets.peak_bytes
+        );
         s
     }
 }

@@ -19,8 +19,14 @@ fn repository_layout_parses_and_fits() {
     assert_eq!(layout.sized_for, "nano");
     // Spot-check capacities against the nano dimensions (D = 256, Q = 3200, F = 60).
     assert_eq!(layout.region("bev_query").unwrap().bytes, 3200 * 256 * 4);
-    assert_eq!(layout.region("value_features").unwrap().bytes, 6 * 60 * 256 * 4);
-    assert_eq!(layout.region("gkt_lut").unwrap().bytes, 6 * 3200 * 2 * (1 + 4 * 15) + 3200);
+    assert_eq!(
+        layout.region("value_features").unwrap().bytes,
+        6 * 60 * 256 * 4
+    );
+    assert_eq!(
+        layout.region("gkt_lut").unwrap().bytes,
+        6 * 3200 * 2 * (1 + 4 * 15) + 3200
+    );
     assert!(layout.runtime_bytes() + layout.arena.graph_engine_bytes <= layout.arena.bytes);
     let consts = layout.to_rust_consts();
     assert!(consts.contains("pub const BEV_QUERY_BYTES: usize = 3276800;"));
@@ -40,28 +46,61 @@ fn each_bad_fixture_fails_with_its_error() {
             matches!(e, LayoutError::Bytes { region, declared: 368_000, computed: 368_640, .. }
                 if region == "value_features")
         }),
-        ("bad_missing_region", |e| matches!(e, LayoutError::MissingRegion("gathered"))),
-        ("bad_missing_budget", |e| matches!(e, LayoutError::MissingBudget("gkt_gather"))),
+        ("bad_missing_region", |e| {
+            matches!(e, LayoutError::MissingRegion("gathered"))
+        }),
+        ("bad_missing_budget", |e| {
+            matches!(e, LayoutError::MissingBudget("gkt_gather"))
+        }),
         ("bad_arena_too_small", |e| {
-            matches!(e, LayoutError::ArenaTooSmall { graph: 805_306_368, arena: 805_306_368, .. })
+            matches!(
+                e,
+                LayoutError::ArenaTooSmall {
+                    graph: 805_306_368,
+                    arena: 805_306_368,
+                    ..
+                }
+            )
         }),
-        ("bad_parse", |e| matches!(e, LayoutError::Parse(m) if m.contains("f31"))),
-        ("bad_unknown_field", |e| matches!(e, LayoutError::Parse(m) if m.contains("size_for"))),
-        ("bad_record_without_elem_bytes", |e| {
-            matches!(e, LayoutError::ElemBytes(r) if r == "tile_cache")
+        (
+            "bad_parse",
+            |e| matches!(e, LayoutError::Parse(m) if m.contains("f31")),
+        ),
+        (
+            "bad_unknown_field",
+            |e| matches!(e, LayoutError::Parse(m) if m.contains("size_for")),
+        ),
+        (
+            "bad_record_without_elem_bytes",
+            |e| matches!(e, LayoutError::ElemBytes(r) if r == "tile_cache"),
+        ),
+        ("bad_zero_step_period", |e| {
+            matches!(e, LayoutError::ZeroStepPeriod)
         }),
-        ("bad_zero_step_period", |e| matches!(e, LayoutError::ZeroStepPeriod)),
         ("bad_peak_above_arena", |e| {
-            matches!(e, LayoutError::PeakAboveArena { peak: 905_306_368, arena: 805_306_368 })
+            matches!(
+                e,
+                LayoutError::PeakAboveArena {
+                    peak: 905_306_368,
+                    arena: 805_306_368
+                }
+            )
         }),
     ];
     let dir = repo_root().join("tests/layouts");
     let on_disk = std::fs::read_dir(&dir).unwrap().count();
-    assert_eq!(on_disk, cases.len(), "every fixture in tests/layouts/ needs a case here");
+    assert_eq!(
+        on_disk,
+        cases.len(),
+        "every fixture in tests/layouts/ needs a case here"
+    );
     for (name, expected) in cases {
         let text = read(&format!("tests/layouts/{name}.toml"));
         let err = MemoryLayout::parse(&text).unwrap_err();
         assert!(expected(&err), "{name}: got {err:?}");
-        assert!(err.to_string().starts_with("ERROR(layout):"), "{name}: {err}");
+        assert!(
+            err.to_string().starts_with("ERROR(layout):"),
+            "{name}: {err}"
+        );
     }
 }
