@@ -22,6 +22,7 @@ fn replay_fits_the_arena_with_a_stable_peak_and_no_runtime_allocations() {
         scenario: ScenarioInput::Synthetic {
             seed: 3,
             speed_mps: 8.0,
+            drive_hz: 2.0,
         },
         frames: 5,
         rate_hz: 1.0,

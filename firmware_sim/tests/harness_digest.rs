@@ -11,6 +11,7 @@ fn config(seed: u64) -> ReplayConfig {
         scenario: ScenarioInput::Synthetic {
             seed,
             speed_mps: 8.0,
+            drive_hz: 2.0,
         },
         frames: 3,
         rate_hz: 1.0,

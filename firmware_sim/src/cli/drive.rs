@@ -37,6 +37,9 @@ pub struct Args {
     /// Mean speed of the synthetic drive, m/s.
     #[arg(long, default_value_t = 8.0)]
     pub speed_mps: f64,
+    /// Rate the synthetic drive is sampled at, Hz (nuScenes keyframes: 2 Hz).
+    #[arg(long, default_value_t = 2.0)]
+    pub drive_hz: f64,
     /// Virtual clock rate, Hz (default: 1 / `[budgets] step_period_us`).
     #[arg(long)]
     pub rate_hz: Option<f64>,
@@ -105,6 +108,7 @@ pub fn run(
             None => ScenarioInput::Synthetic {
                 seed: args.seed,
                 speed_mps: args.speed_mps,
+                drive_hz: args.drive_hz,
             },
         },
         frames: args.frames,

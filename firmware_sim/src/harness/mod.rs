@@ -131,6 +131,9 @@ pub enum ScenarioInput {
         seed: u64,
         /// Mean speed, m/s.
         speed_mps: f64,
+        /// Rate the drive is sampled at, Hz (the sensor rate; the virtual clock of the replay
+        /// sets only the deadlines, so a slow reference machine replays a drive in slow motion).
+        drive_hz: f64,
     },
     /// A scenario folder (`synth/SCENARIO.md`).
     Folder(PathBuf),
@@ -267,14 +270,18 @@ fn open_scenario(
     let scen = |e: &dyn std::fmt::Display| HarnessError::Scenario(e.to_string());
     let pack = |e: &dyn std::fmt::Display| HarnessError::Pack(e.to_string());
     match &cfg.scenario {
-        ScenarioInput::Synthetic { seed, speed_mps } => {
+        ScenarioInput::Synthetic {
+            seed,
+            speed_mps,
+            drive_hz,
+        } => {
             let drive = SyntheticDrive::new(
                 *seed,
                 DriveConfig {
                     image_width_px: image_w_px,
                     image_height_px: image_h_px,
                     num_frames: cfg.frames,
-                    frame_rate_hz: cfg.rate_hz,
+                    frame_rate_hz: *drive_hz,
                     mean_speed_mps: *speed_mps,
                     ..DriveConfig::default()
                 },
@@ -563,8 +570,14 @@ pub fn replay(
                 .to_owned(),
         });
         let scenario = match &cfg.scenario {
-            ScenarioInput::Synthetic { seed, speed_mps } => {
-                format!("a synthetic drive (seed {seed}, {speed_mps} m/s)")
+            ScenarioInput::Synthetic {
+                seed,
+                speed_mps,
+                drive_hz,
+            } => {
+                format!(
+                    "a synthetic drive (seed {seed}, {speed_mps} m/s, sampled at {drive_hz} Hz)"
+                )
             }
             ScenarioInput::Folder(d) => format!("scenario {}", d.display()),
         };
