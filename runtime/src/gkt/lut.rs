@@ -255,9 +255,8 @@ mod tests {
     use super::*;
     use crate::calibration::CameraCalibration;
 
-    /// A forward camera at the ego origin, 1 m up, looking along +y; the other five look
-    /// straight up (they see nothing of the ground grid at the GKT heights below 1 m... and are
-    /// checked by the generic invariants only).
+    /// Camera 0 looks along +y from 1 m above the ego origin; the other five sit 10 m up and
+    /// look straight up, so they see nothing at the GKT heights.
     fn simple_rig() -> Calibration {
         // camera z (optical) -> ego +y, camera x -> ego +x, camera y (down) -> ego -z.
         let forward = DQuat::from_mat3(&glam::DMat3::from_cols(DVec3::X, DVec3::NEG_Z, DVec3::Y));
@@ -356,7 +355,8 @@ mod tests {
             );
             // Row-major lidar2img matches the calibration.
             let l2i = cal.lidar2img(dims.image_scale);
-            assert_eq!(dense.lidar2img[4 * 0 + 3], l2i[0].w_axis.x);
+            // Row 0, column 3 of camera 0.
+            assert_eq!(dense.lidar2img[3], l2i[0].w_axis.x);
         }
     }
 
