@@ -39,9 +39,12 @@ fn repository_layout_parses_and_fits() {
     assert!(map.contains("headroom"));
 }
 
+/// A fixture name and the check its error must pass.
+type Case = (&'static str, fn(&LayoutError) -> bool);
+
 #[test]
 fn each_bad_fixture_fails_with_its_error() {
-    let cases: [(&str, fn(&LayoutError) -> bool); 9] = [
+    let cases: [Case; 9] = [
         ("bad_bytes", |e| {
             matches!(e, LayoutError::Bytes { region, declared: 368_000, computed: 368_640, .. }
                 if region == "value_features")
