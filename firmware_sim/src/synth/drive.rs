@@ -330,6 +330,8 @@ impl SatelliteSource for WorldSatellite<'_> {
     fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage {
         let n = spec.height_px * spec.width_px * 3;
         if out.len() != n {
+            // Wrong buffer for this spec: nothing usable, but every byte is still written.
+            out.fill(0);
             return Coverage::None;
         }
         for r in 0..spec.height_px {

@@ -118,10 +118,8 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
         (-lo.x / gsd_m) as f32,
         (hi.y / gsd_m) as f32,
     );
-    // Shift coordinates near the raster so f32 keeps centimetres.
     let cfg = world.config;
     let walk = cfg.sidewalk_width_m;
-    let length = world.main.length_m();
 
     let sidewalk = world.main_polygon(walk);
     fill(&mut pixmap, &sidewalk, [168, 166, 158, 255], to_px);
@@ -211,7 +209,6 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
             );
         }
     }
-    let _ = length;
 
     // Sun from a seeded azimuth; shadows fall away from it.
     let shadow_angle = (hash01(seed, 17, 3) * std::f64::consts::TAU as f32) as f64;
