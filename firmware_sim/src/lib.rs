@@ -9,5 +9,5 @@ pub mod cli;
 pub mod eval;
 pub mod harness;
 pub mod render;
-pub mod synth;
 pub mod route_pack_builder;
+pub mod synth;

@@ -49,16 +49,44 @@ const _: () = assert!(layout::TILE_CACHE_SHAPE[0] == crate::route_pack::TILE_CAC
 pub fn check_regions(dims: &crate::model_dims::ModelDims) -> Result<(), crate::error::InitError> {
     let f32s = |n: usize| n.saturating_mul(4);
     let regions: [(&'static str, usize, usize); 11] = [
-        ("camera_images", MAX_CAMERAS.saturating_mul(dims.image_bytes()), layout::CAMERA_IMAGES_BYTES),
-        ("value_features", f32s(MAX_CAMERAS.saturating_mul(dims.value_len())), layout::VALUE_FEATURES_BYTES),
-        ("gkt_lut", crate::gkt::Lut::capacity_bytes(dims), layout::GKT_LUT_BYTES),
+        (
+            "camera_images",
+            MAX_CAMERAS.saturating_mul(dims.image_bytes()),
+            layout::CAMERA_IMAGES_BYTES,
+        ),
+        (
+            "value_features",
+            f32s(MAX_CAMERAS.saturating_mul(dims.value_len())),
+            layout::VALUE_FEATURES_BYTES,
+        ),
+        (
+            "gkt_lut",
+            crate::gkt::Lut::capacity_bytes(dims),
+            layout::GKT_LUT_BYTES,
+        ),
         ("bev_query", f32s(dims.bev_len()), layout::BEV_QUERY_BYTES),
-        ("gkt_weights", f32s(dims.weights_len()), layout::GKT_WEIGHTS_BYTES),
+        (
+            "gkt_weights",
+            f32s(dims.weights_len()),
+            layout::GKT_WEIGHTS_BYTES,
+        ),
         ("gathered", f32s(dims.bev_len()), layout::GATHERED_BYTES),
         ("camera_bev", f32s(dims.bev_len()), layout::CAMERA_BEV_BYTES),
-        ("satellite_crop", dims.crop_bytes(), layout::SATELLITE_CROP_BYTES),
-        ("satellite_bev", f32s(dims.bev_len()), layout::SATELLITE_BEV_BYTES),
-        ("class_logits", f32s(dims.logits_len()), layout::CLASS_LOGITS_BYTES),
+        (
+            "satellite_crop",
+            dims.crop_bytes(),
+            layout::SATELLITE_CROP_BYTES,
+        ),
+        (
+            "satellite_bev",
+            f32s(dims.bev_len()),
+            layout::SATELLITE_BEV_BYTES,
+        ),
+        (
+            "class_logits",
+            f32s(dims.logits_len()),
+            layout::CLASS_LOGITS_BYTES,
+        ),
         ("points", f32s(dims.points_len()), layout::POINTS_BYTES),
     ];
     for (region, needed_bytes, capacity_bytes) in regions {
@@ -103,7 +131,11 @@ mod tests {
         dims.embed_dims = 512;
         assert!(matches!(
             check_regions(&dims),
-            Err(InitError::RegionTooSmall { region: "value_features", needed_bytes: 737_280, .. })
+            Err(InitError::RegionTooSmall {
+                region: "value_features",
+                needed_bytes: 737_280,
+                ..
+            })
         ));
     }
 

@@ -44,7 +44,11 @@ impl fmt::Display for InitError {
             Self::InvalidCalibration { camera, fault } => {
                 write!(f, "calibration of camera {camera}: {fault}")
             }
-            Self::RegionTooSmall { region, needed_bytes, capacity_bytes } => write!(
+            Self::RegionTooSmall {
+                region,
+                needed_bytes,
+                capacity_bytes,
+            } => write!(
                 f,
                 "region `{region}` does not fit: the model needs {needed_bytes} bytes, \
                  memory_layout.toml gives {capacity_bytes}"

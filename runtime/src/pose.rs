@@ -21,7 +21,10 @@ impl EgoPose {
     /// Pose at `position_m` with heading `yaw_rad`.
     #[must_use]
     pub const fn new(position_m: DVec2, yaw_rad: f64) -> Self {
-        Self { position_m, yaw_rad }
+        Self {
+            position_m,
+            yaw_rad,
+        }
     }
 
     /// True when every field is finite.

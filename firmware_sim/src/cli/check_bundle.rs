@@ -58,15 +58,23 @@ pub fn run(args: &Args) -> Result<()> {
             worst = worst.max(check.max_abs_diff);
         }
     }
-    println!("worst max abs diff {worst:.3e} (tolerance {:.1e})", args.tolerance);
+    println!(
+        "worst max abs diff {worst:.3e} (tolerance {:.1e})",
+        args.tolerance
+    );
     if worst.is_nan() || worst > args.tolerance {
-        bail!("tract differs from onnxruntime by {worst:.3e} > {:.1e}", args.tolerance);
+        bail!(
+            "tract differs from onnxruntime by {worst:.3e} > {:.1e}",
+            args.tolerance
+        );
     }
     Ok(())
 }
 
 fn f32s(st: &SafeTensors<'_>, name: &str) -> Result<Vec<f32>> {
-    let view = st.tensor(name).with_context(|| format!("reference has no `{name}`"))?;
+    let view = st
+        .tensor(name)
+        .with_context(|| format!("reference has no `{name}`"))?;
     if view.dtype() != safetensors::Dtype::F32 {
         bail!("`{name}` is {:?}, expected F32", view.dtype());
     }
@@ -78,7 +86,9 @@ fn f32s(st: &SafeTensors<'_>, name: &str) -> Result<Vec<f32>> {
 }
 
 fn u8s<'a>(st: &'a SafeTensors<'_>, name: &str) -> Result<&'a [u8]> {
-    let view = st.tensor(name).with_context(|| format!("reference has no `{name}`"))?;
+    let view = st
+        .tensor(name)
+        .with_context(|| format!("reference has no `{name}`"))?;
     if view.dtype() != safetensors::Dtype::U8 {
         bail!("`{name}` is {:?}, expected U8", view.dtype());
     }

@@ -89,7 +89,11 @@ pub fn expected_interface(stage: Stage, dims: &ModelDims) -> (Vec<TensorSpec>, V
             vec![t("can_bus", &[18], DType::F32)],
             vec![
                 t("bev_query", &[q, d], DType::F32),
-                t("gkt_weights", &[q, 4, dims.kernel_h * dims.kernel_w], DType::F32),
+                t(
+                    "gkt_weights",
+                    &[q, 4, dims.kernel_h * dims.kernel_w],
+                    DType::F32,
+                ),
             ],
         ),
         Stage::BevEncoder => (

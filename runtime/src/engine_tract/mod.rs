@@ -39,7 +39,9 @@ impl StageRunner {
             stage: stage.name(),
             message: format!("{e:#}"),
         };
-        let mut model = tract_onnx::onnx().model_for_path(&path).map_err(engine_err)?;
+        let mut model = tract_onnx::onnx()
+            .model_for_path(&path)
+            .map_err(engine_err)?;
         for (ix, spec) in entry.inputs.iter().enumerate() {
             model = model
                 .with_input_fact(ix, InferenceFact::dt_shape(datum(spec.dtype), &spec.shape))
@@ -49,7 +51,12 @@ impl StageRunner {
             .into_optimized()
             .and_then(|m| m.into_runnable())
             .map_err(engine_err)?;
-        check_graph_io(stage, &plan, entry.inputs.as_slice(), entry.outputs.as_slice())?;
+        check_graph_io(
+            stage,
+            &plan,
+            entry.inputs.as_slice(),
+            entry.outputs.as_slice(),
+        )?;
         let state = plan.spawn().map_err(engine_err)?;
         let inputs = entry
             .inputs
@@ -57,7 +64,11 @@ impl StageRunner {
             .map(|spec| Tensor::zero_dt(datum(spec.dtype), &spec.shape).map(Arc::new))
             .collect::<TractResult<Vec<_>>>()
             .map_err(engine_err)?;
-        let output_lens = entry.outputs.iter().map(|s| s.shape.iter().product()).collect();
+        let output_lens = entry
+            .outputs
+            .iter()
+            .map(|s| s.shape.iter().product())
+            .collect();
         Ok(Self {
             stage,
             state,
@@ -92,7 +103,10 @@ impl StageRunner {
             .as_slice_mut::<T>()
             .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
         if dst.len() != src.len() {
-            return Err(err(EngineErrorKind::ShapeMismatch { expected: dst.len(), got: src.len() }));
+            return Err(err(EngineErrorKind::ShapeMismatch {
+                expected: dst.len(),
+                got: src.len(),
+            }));
         }
         dst.copy_from_slice(src);
         Ok(())
@@ -111,7 +125,11 @@ impl StageRunner {
                 }));
             }
         }
-        let inputs: TVec<TValue> = self.inputs.iter().map(|t| TValue::from_const(Arc::clone(t))).collect();
+        let inputs: TVec<TValue> = self
+            .inputs
+            .iter()
+            .map(|t| TValue::from_const(Arc::clone(t)))
+            .collect();
         let results = match self.state.run(inputs) {
             Ok(results) => results,
             Err(e) => {
@@ -198,12 +216,16 @@ fn check_graph_io(
     };
     check(
         "input",
-        (0..model.inputs.len()).map(|i| model.input_fact(i)).collect(),
+        (0..model.inputs.len())
+            .map(|i| model.input_fact(i))
+            .collect(),
         inputs,
     )?;
     check(
         "output",
-        (0..model.outputs.len()).map(|i| model.output_fact(i)).collect(),
+        (0..model.outputs.len())
+            .map(|i| model.output_fact(i))
+            .collect(),
         outputs,
     )
 }
@@ -216,7 +238,9 @@ pub struct TractEngine {
 
 impl core::fmt::Debug for TractEngine {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.debug_struct("TractEngine").field("dims", &self.dims).finish_non_exhaustive()
+        f.debug_struct("TractEngine")
+            .field("dims", &self.dims)
+            .finish_non_exhaustive()
     }
 }
 
