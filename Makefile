@@ -10,7 +10,7 @@ CARGO ?= cargo
 .PHONY: demo test test-rust test-python lint nostd venv
 
 demo:
-	$(CARGO) run --release -p satmap-sim -- drive --out out/demo
+	$(CARGO) run -p satmap-sim -- drive --out out/demo
 
 test: lint nostd test-rust test-python
 
