@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::geo::Geodetic;
 use satmap_runtime::satellite::SatelliteSource;
 
@@ -81,7 +82,7 @@ pub fn run(args: &Args) -> Result<()> {
     };
     let drive = match &args.calibration {
         Some(path) => {
-            let cal = crate::synth::calibration_file::load_calibration(path)?;
+            let cal = from_toml_file(path)?;
             SyntheticDrive::with_calibration(args.seed, config, cal)?
         }
         None => SyntheticDrive::new(args.seed, config)?,

@@ -4,12 +4,11 @@
 //! can replay a drive without touching the disk.
 
 use glam::{DVec2, Vec3};
-use satmap_runtime::calibration::Calibration;
+use satmap_runtime::calibration::{Calibration, CalibrationFileError, from_toml_str};
 use satmap_runtime::pose::{EgoMotion, EgoPose};
 use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};
 use serde::{Deserialize, Serialize};
 
-use super::calibration_file::{CalibrationFileError, parse_calibration};
 use super::camera_render::CameraRig;
 use super::ground_raster::{GroundRaster, RasterError, WorldRasters, paint_world};
 use super::lighting::{Lighting, LightingPreset};
@@ -111,7 +110,7 @@ pub struct SyntheticDrive {
 impl SyntheticDrive {
     /// A drive with the built-in nuScenes-like rig.
     pub fn new(seed: u64, config: DriveConfig) -> Result<Self, SynthError> {
-        let calibration = parse_calibration(NUSCENES_LIKE_CALIBRATION_TOML)?;
+        let calibration = from_toml_str(NUSCENES_LIKE_CALIBRATION_TOML)?;
         Self::with_calibration(seed, config, calibration)
     }
 

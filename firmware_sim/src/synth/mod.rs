@@ -2,7 +2,6 @@
 //! images, per-frame ground truth cut to the perception patch, and the scenario folder format
 //! (`SCENARIO.md`).
 //!
-//! - `calibration_file`: the rig TOML (stopgap until the runtime's loader lands).
 //! - `centerline`: straights and arcs, evaluated at any arc length and lateral offset.
 //! - `world`: road network, ground-truth polylines in the route frame, occluders.
 //! - `ground_raster`: the top-down ground and satellite rasters, painted once per world.
@@ -17,7 +16,6 @@
 //! Determinism: every random choice comes from PCG64 seeded with the drive seed, and texture
 //! noise from an integer hash, so a seed gives the same world on every platform.
 
-pub mod calibration_file;
 pub mod camera_render;
 pub mod centerline;
 pub mod drive;

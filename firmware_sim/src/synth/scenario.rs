@@ -4,12 +4,13 @@
 use std::path::{Path, PathBuf};
 
 use glam::{DVec2, DVec3, Vec3};
-use satmap_runtime::calibration::Calibration;
+use satmap_runtime::calibration::{
+    Calibration, CalibrationFileError, from_toml_file, from_toml_str,
+};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::pose::{EgoMotion, EgoPose};
 use serde::{Deserialize, Serialize};
 
-use super::calibration_file::{CalibrationFileError, load_calibration, parse_calibration};
 use super::drive::{DriveConfig, NUSCENES_LIKE_CALIBRATION_TOML, SynthFrame, SyntheticDrive};
 use super::lighting::LightingPreset;
 use super::slippy_tiles::{TileWriteError, write_tiles};
@@ -273,7 +274,7 @@ pub fn write_scenario(
 /// built-in rig, so comments survive).
 #[must_use]
 pub fn calibration_toml(c: &Calibration) -> String {
-    if parse_calibration(NUSCENES_LIKE_CALIBRATION_TOML).is_ok_and(|b| b == *c) {
+    if from_toml_str(NUSCENES_LIKE_CALIBRATION_TOML).is_ok_and(|b| b == *c) {
         return NUSCENES_LIKE_CALIBRATION_TOML.to_owned();
     }
     let mut s = format!(
@@ -351,7 +352,7 @@ impl Scenario {
                 manifest.format
             )));
         }
-        let calibration = load_calibration(&dir.join(&manifest.calibration_file))?;
+        let calibration = from_toml_file(&dir.join(&manifest.calibration_file))?;
         Ok(Self {
             dir: dir.to_owned(),
             manifest,
