@@ -54,15 +54,9 @@ impl Golden {
         self.st().tensor(name).unwrap().data().to_vec()
     }
 
-    /// A tensor as f32.
+    /// A tensor as f32 (the reader `check-bundle` uses, so both check dtypes alike).
     pub fn f32s(&self, name: &str) -> Vec<f32> {
-        let st = self.st();
-        let t = st.tensor(name).unwrap();
-        assert_eq!(t.dtype(), safetensors::Dtype::F32, "{name}");
-        t.data()
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-            .collect()
+        satmap_sim::cli::check_bundle::f32s(&self.st(), name).unwrap()
     }
 
     /// A tensor as f64.

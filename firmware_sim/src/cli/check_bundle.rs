@@ -71,7 +71,8 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-fn f32s(st: &SafeTensors<'_>, name: &str) -> Result<Vec<f32>> {
+/// Tensor `name` of `st` as f32 values; an error if it is missing or not F32.
+pub fn f32s(st: &SafeTensors<'_>, name: &str) -> Result<Vec<f32>> {
     let view = st
         .tensor(name)
         .with_context(|| format!("reference has no `{name}`"))?;
@@ -85,7 +86,8 @@ fn f32s(st: &SafeTensors<'_>, name: &str) -> Result<Vec<f32>> {
         .collect())
 }
 
-fn u8s<'a>(st: &'a SafeTensors<'_>, name: &str) -> Result<&'a [u8]> {
+/// Tensor `name` of `st` as bytes; an error if it is missing or not U8.
+pub fn u8s<'a>(st: &'a SafeTensors<'_>, name: &str) -> Result<&'a [u8]> {
     let view = st
         .tensor(name)
         .with_context(|| format!("reference has no `{name}`"))?;
