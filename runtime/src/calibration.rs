@@ -55,34 +55,47 @@ pub struct Calibration {
     pub cameras: [CameraCalibration; NUM_CAMERAS],
 }
 
+/// Smallest focal length accepted, as a fraction of the raw image extent along the same axis
+/// (`fx_px / raw_width_px`, `fy_px / raw_height_px`): 0.05 is a field of view of
+/// `2 atan(10)` = 169 deg, past what a pinhole model describes.
+pub const MIN_FOCAL_PER_EXTENT: f64 = 0.05;
+
+/// Largest focal length accepted, as a fraction of the raw image extent along the same axis:
+/// 100 is a field of view of `2 atan(1/200)` = 0.57 deg. Beyond it the f32 projection matrix
+/// loses the camera (at `fx_px = 1e300` it overflows to infinity and silently drops it).
+pub const MAX_FOCAL_PER_EXTENT: f64 = 100.0;
+
+/// Largest distance of a camera from the ego origin, metres: a camera further out is not on the
+/// vehicle (a typo in units, or a translation in another frame).
+pub const MAX_CAMERA_DISTANCE_M: f64 = 10.0;
+
+/// Tolerance on `|rotation| - 1`: the quaternion is used as written (not re-normalised, so both
+/// sides of the LUT contract build `lidar2img` from the same bits), so it must already be unit.
+pub const ROTATION_NORM_TOLERANCE: f64 = 1e-6;
+
 impl Calibration {
-    /// Check every camera: finite numbers, positive focal lengths, unit rotations (within 1e-6).
+    /// Check the rig: a non-zero raw size, then every camera in model order: finite numbers,
+    /// positive focal lengths within [`MIN_FOCAL_PER_EXTENT`, `MAX_FOCAL_PER_EXTENT`] of the
+    /// raw extent, the principal point inside the raw image (`0..=raw_width_px`,
+    /// `0..=raw_height_px`), a unit rotation (within [`ROTATION_NORM_TOLERANCE`]) and the camera
+    /// within [`MAX_CAMERA_DISTANCE_M`] of the ego origin.
     ///
     /// # Errors
-    /// The first invalid camera (model index) and what is wrong with it.
+    /// The first invalid camera (model index) and what is wrong with it, naming the field and
+    /// its value. A zero raw size concerns the whole rig and is reported as camera 0,
+    /// [`CalibrationFault::ZeroRawSize`].
     pub fn validate(&self) -> Result<(), (usize, CalibrationFault)> {
+        if self.raw_width_px == 0 || self.raw_height_px == 0 {
+            return Err((0, CalibrationFault::ZeroRawSize));
+        }
+        let (raw_w_px, raw_h_px) = (f64::from(self.raw_width_px), f64::from(self.raw_height_px));
         for (i, c) in self.cameras.iter().enumerate() {
-            let finite = c.fx_px.is_finite()
-                && c.fy_px.is_finite()
-                && c.cx_px.is_finite()
-                && c.cy_px.is_finite()
-                && c.translation_m.is_finite()
-                && c.rotation.is_finite();
-            if !finite {
-                return Err((i, CalibrationFault::NonFinite));
-            }
-            if c.fx_px <= 0.0 || c.fy_px <= 0.0 {
-                return Err((i, CalibrationFault::NonPositiveFocal));
-            }
-            if (c.rotation.length() - 1.0).abs() >= 1e-6 {
-                return Err((i, CalibrationFault::NonUnitRotation));
-            }
+            c.validate(raw_w_px, raw_h_px).map_err(|fault| (i, fault))?;
         }
         Ok(())
     }
 
-    /// True when every number is finite, focal lengths are positive and rotations are unit
-    /// quaternions (within 1e-6).
+    /// True when [`Calibration::validate`] passes.
     #[must_use]
     pub fn is_valid(&self) -> bool {
         self.validate().is_ok()
@@ -129,25 +142,204 @@ impl Calibration {
     }
 }
 
-/// What is wrong with one camera of a [`Calibration`].
+impl CameraCalibration {
+    /// The per-camera checks of [`Calibration::validate`], against the raw image size in pixels.
+    fn validate(&self, raw_w_px: f64, raw_h_px: f64) -> Result<(), CalibrationFault> {
+        use CalibrationField as F;
+        let scalars = [
+            (F::FxPx, self.fx_px),
+            (F::FyPx, self.fy_px),
+            (F::CxPx, self.cx_px),
+            (F::CyPx, self.cy_px),
+        ];
+        for (field, v) in scalars {
+            if !v.is_finite() {
+                return Err(CalibrationFault::NonFinite { field });
+            }
+        }
+        if !self.translation_m.is_finite() {
+            return Err(CalibrationFault::NonFinite {
+                field: F::TranslationM,
+            });
+        }
+        if !self.rotation.is_finite() {
+            return Err(CalibrationFault::NonFinite { field: F::Rotation });
+        }
+        for (field, value_px, extent_px) in [
+            (F::FxPx, self.fx_px, raw_w_px),
+            (F::FyPx, self.fy_px, raw_h_px),
+        ] {
+            if value_px <= 0.0 {
+                return Err(CalibrationFault::NonPositiveFocal { field, value_px });
+            }
+            let (min_px, max_px) = (
+                MIN_FOCAL_PER_EXTENT * extent_px,
+                MAX_FOCAL_PER_EXTENT * extent_px,
+            );
+            if value_px < min_px || value_px > max_px {
+                return Err(CalibrationFault::FocalOutOfRange {
+                    field,
+                    value_px,
+                    min_px,
+                    max_px,
+                });
+            }
+        }
+        for (field, value_px, max_px) in [
+            (F::CxPx, self.cx_px, raw_w_px),
+            (F::CyPx, self.cy_px, raw_h_px),
+        ] {
+            if value_px < 0.0 || value_px > max_px {
+                return Err(CalibrationFault::PrincipalPointOutsideImage {
+                    field,
+                    value_px,
+                    max_px,
+                });
+            }
+        }
+        let norm = self.rotation.length();
+        if (norm - 1.0).abs() >= ROTATION_NORM_TOLERANCE {
+            return Err(CalibrationFault::NonUnitRotation { norm });
+        }
+        let distance_m = self.translation_m.length();
+        if distance_m > MAX_CAMERA_DISTANCE_M {
+            return Err(CalibrationFault::CameraTooFar {
+                distance_m,
+                max_m: MAX_CAMERA_DISTANCE_M,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A field of one camera of a [`Calibration`] (as named in the calibration file), for error
+/// context.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CalibrationField {
+    /// Focal length along image x.
+    FxPx,
+    /// Focal length along image y.
+    FyPx,
+    /// Principal point x.
+    CxPx,
+    /// Principal point y.
+    CyPx,
+    /// Camera origin in the ego frame.
+    TranslationM,
+    /// Camera->ego rotation quaternion.
+    Rotation,
+}
+
+impl CalibrationField {
+    /// The field's name in the calibration file (`fx_px`, ..., `translation_m`, `rotation_wxyz`).
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::FxPx => "fx_px",
+            Self::FyPx => "fy_px",
+            Self::CxPx => "cx_px",
+            Self::CyPx => "cy_px",
+            Self::TranslationM => "translation_m",
+            Self::Rotation => "rotation_wxyz",
+        }
+    }
+}
+
+impl fmt::Display for CalibrationField {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// What is wrong with one camera of a [`Calibration`] (or, for [`Self::ZeroRawSize`], the
+/// rig). `PartialEq` but not `Eq`: variants carry the offending `f64` values.
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum CalibrationFault {
+    /// `raw_width_px` or `raw_height_px` is zero (a property of the whole rig).
+    ZeroRawSize,
     /// An intrinsic, the translation or the rotation is NaN or infinite.
-    NonFinite,
+    NonFinite {
+        /// The field.
+        field: CalibrationField,
+    },
     /// A focal length is zero or negative.
-    NonPositiveFocal,
-    /// The rotation quaternion is not of unit length (within 1e-6).
-    NonUnitRotation,
+    NonPositiveFocal {
+        /// `FxPx` or `FyPx`.
+        field: CalibrationField,
+        /// Its value, pixels.
+        value_px: f64,
+    },
+    /// A focal length is outside [`MIN_FOCAL_PER_EXTENT`, `MAX_FOCAL_PER_EXTENT`] times the raw
+    /// image extent along its axis.
+    FocalOutOfRange {
+        /// `FxPx` or `FyPx`.
+        field: CalibrationField,
+        /// Its value, pixels.
+        value_px: f64,
+        /// Smallest accepted value, pixels.
+        min_px: f64,
+        /// Largest accepted value, pixels.
+        max_px: f64,
+    },
+    /// The principal point lies outside the raw image.
+    PrincipalPointOutsideImage {
+        /// `CxPx` or `CyPx`.
+        field: CalibrationField,
+        /// Its value, pixels.
+        value_px: f64,
+        /// Largest accepted value (the raw width or height), pixels; the smallest is 0.
+        max_px: f64,
+    },
+    /// The rotation quaternion is not of unit length (within [`ROTATION_NORM_TOLERANCE`]).
+    NonUnitRotation {
+        /// Its norm.
+        norm: f64,
+    },
+    /// The camera is further than [`MAX_CAMERA_DISTANCE_M`] from the ego origin.
+    CameraTooFar {
+        /// `|translation_m|`, metres.
+        distance_m: f64,
+        /// The largest accepted distance, metres.
+        max_m: f64,
+    },
 }
 
 impl fmt::Display for CalibrationFault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Self::NonFinite => "a calibration value is not finite",
-            Self::NonPositiveFocal => "a focal length is not positive",
-            Self::NonUnitRotation => "the rotation quaternion is not of unit length",
-        })
+        match *self {
+            Self::ZeroRawSize => f.write_str("raw_width_px and raw_height_px must be positive"),
+            Self::NonFinite { field } => write!(f, "{field} is not finite"),
+            Self::NonPositiveFocal { field, value_px } => {
+                write!(f, "{field} = {value_px} px is not positive")
+            }
+            Self::FocalOutOfRange {
+                field,
+                value_px,
+                min_px,
+                max_px,
+            } => write!(
+                f,
+                "{field} = {value_px:e} px is outside [{min_px}, {max_px}] px \
+                 ({MIN_FOCAL_PER_EXTENT} to {MAX_FOCAL_PER_EXTENT} times the raw extent)"
+            ),
+            Self::PrincipalPointOutsideImage {
+                field,
+                value_px,
+                max_px,
+            } => write!(
+                f,
+                "{field} = {value_px} px is outside the raw image [0, {max_px}] px"
+            ),
+            Self::NonUnitRotation { norm } => write!(
+                f,
+                "rotation_wxyz has norm {norm}, expected 1 (within {ROTATION_NORM_TOLERANCE:e})"
+            ),
+            Self::CameraTooFar { distance_m, max_m } => write!(
+                f,
+                "translation_m is {distance_m} m from the ego origin, more than {max_m} m"
+            ),
+        }
     }
 }
 

@@ -5,16 +5,20 @@ use core::fmt;
 
 use crate::calibration::CalibrationFault;
 use crate::engine::{EngineError, Stage};
+use crate::frame::Axis;
 use crate::gkt::KernelError;
 use crate::model_dims::DimsError;
 
 /// Why the runtime could not be created or recalibrated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+///
+/// `PartialEq` but not `Eq`: calibration faults carry the offending `f64` values.
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum InitError {
     /// The engine's model dimensions exceed the runtime's bounds.
     Dims(DimsError),
-    /// A camera of the calibration is invalid.
+    /// A camera of the calibration is invalid (or, for
+    /// [`CalibrationFault::ZeroRawSize`], the whole rig; `camera` is then 0).
     InvalidCalibration {
         /// Camera index (model order).
         camera: usize,
@@ -35,12 +39,22 @@ pub enum InitError {
         /// Bytes requested.
         bytes: usize,
     },
+    /// A field of the [`FrameLimits`](crate::frame::FrameLimits) is unusable (a zero gap, a
+    /// NaN, zero or negative bound).
+    InvalidLimits {
+        /// Field name, as in `FrameLimits`.
+        field: &'static str,
+    },
 }
 
 impl fmt::Display for InitError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Dims(e) => write!(f, "invalid model dimensions: {e}"),
+            Self::InvalidCalibration {
+                fault: fault @ CalibrationFault::ZeroRawSize,
+                ..
+            } => write!(f, "calibration: {fault}"),
             Self::InvalidCalibration { camera, fault } => {
                 write!(f, "calibration of camera {camera}: {fault}")
             }
@@ -54,6 +68,9 @@ impl fmt::Display for InitError {
                  memory_layout.toml gives {capacity_bytes}"
             ),
             Self::OutOfMemory { bytes } => write!(f, "cannot reserve a buffer of {bytes} bytes"),
+            Self::InvalidLimits { field } => {
+                write!(f, "frame limit `{field}` must be positive and not NaN")
+            }
         }
     }
 }
@@ -63,7 +80,9 @@ impl core::error::Error for InitError {
         match self {
             Self::Dims(e) => Some(e),
             Self::InvalidCalibration { fault, .. } => Some(fault),
-            Self::RegionTooSmall { .. } | Self::OutOfMemory { .. } => None,
+            Self::RegionTooSmall { .. } | Self::OutOfMemory { .. } | Self::InvalidLimits { .. } => {
+                None
+            }
         }
     }
 }
@@ -76,7 +95,9 @@ impl From<DimsError> for InitError {
 
 /// Why a step produced no map. A failed step leaves the runtime's state (last sequence,
 /// timestamp and map) unchanged; the next good frame steps normally.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+///
+/// `PartialEq` but not `Eq`: the range variants carry the offending float values.
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum StepError {
     /// The sequence counter did not increase.
@@ -93,10 +114,80 @@ pub enum StepError {
         /// Timestamp of this frame, µs.
         got_us: u64,
     },
+    /// The sequence counter jumped further ahead than
+    /// [`FrameLimits::max_sequence_gap`](crate::frame::FrameLimits::max_sequence_gap). The
+    /// frame is not adopted: the next frame is still checked against `previous`.
+    SequenceGapTooLarge {
+        /// Sequence of the last successful step.
+        previous: u64,
+        /// Sequence of this frame.
+        got: u64,
+        /// The largest accepted gap.
+        max_gap: u64,
+    },
+    /// The timestamp jumped further ahead than
+    /// [`FrameLimits::max_timestamp_gap_us`](crate::frame::FrameLimits::max_timestamp_gap_us).
+    /// The frame is not adopted: the next frame is still checked against `previous_us`.
+    TimestampGapTooLarge {
+        /// Timestamp of the last successful step, µs.
+        previous_us: u64,
+        /// Timestamp of this frame, µs.
+        got_us: u64,
+        /// The largest accepted gap, µs.
+        max_gap_us: u64,
+    },
     /// Position or yaw is NaN or infinite.
     NonFinitePose,
+    /// A route-frame position component is beyond
+    /// [`FrameLimits::max_abs_position_m`](crate::frame::FrameLimits::max_abs_position_m).
+    PositionOutOfRange {
+        /// The component (x or y).
+        axis: Axis,
+        /// Its value, metres.
+        value_m: f64,
+        /// The largest accepted magnitude, metres.
+        limit_m: f64,
+    },
+    /// The yaw is beyond
+    /// [`FrameLimits::max_abs_yaw_rad`](crate::frame::FrameLimits::max_abs_yaw_rad).
+    YawOutOfRange {
+        /// Its value, radians.
+        value_rad: f64,
+        /// The largest accepted magnitude, radians.
+        limit_rad: f64,
+    },
     /// Acceleration, rotation rate or velocity has a NaN or infinite component.
     NonFiniteMotion,
+    /// An acceleration component is beyond
+    /// [`FrameLimits::max_abs_acceleration_mps2`](crate::frame::FrameLimits::max_abs_acceleration_mps2).
+    AccelerationOutOfRange {
+        /// The component (ego frame).
+        axis: Axis,
+        /// Its value, m/s^2.
+        value_mps2: f32,
+        /// The largest accepted magnitude, m/s^2.
+        limit_mps2: f32,
+    },
+    /// A rotation-rate component is beyond
+    /// [`FrameLimits::max_abs_rotation_rate_radps`](crate::frame::FrameLimits::max_abs_rotation_rate_radps).
+    RotationRateOutOfRange {
+        /// The component (ego frame).
+        axis: Axis,
+        /// Its value, rad/s.
+        value_radps: f32,
+        /// The largest accepted magnitude, rad/s.
+        limit_radps: f32,
+    },
+    /// A velocity component is beyond
+    /// [`FrameLimits::max_abs_velocity_mps`](crate::frame::FrameLimits::max_abs_velocity_mps).
+    VelocityOutOfRange {
+        /// The component (ego frame).
+        axis: Axis,
+        /// Its value, m/s.
+        value_mps: f32,
+        /// The largest accepted magnitude, m/s.
+        limit_mps: f32,
+    },
     /// A camera delivered no image.
     MissingCamera {
         /// Camera index (model order).
@@ -147,8 +238,64 @@ impl fmt::Display for StepError {
             } => {
                 write!(f, "timestamp {got_us} us does not follow {previous_us} us")
             }
+            Self::SequenceGapTooLarge {
+                previous,
+                got,
+                max_gap,
+            } => write!(
+                f,
+                "sequence {got} jumps more than {max_gap} ahead of {previous}; frame ignored"
+            ),
+            Self::TimestampGapTooLarge {
+                previous_us,
+                got_us,
+                max_gap_us,
+            } => write!(
+                f,
+                "timestamp {got_us} us jumps more than {max_gap_us} us ahead of {previous_us} us; \
+                 frame ignored"
+            ),
             Self::NonFinitePose => f.write_str("ego pose is not finite"),
+            Self::PositionOutOfRange {
+                axis,
+                value_m,
+                limit_m,
+            } => write!(
+                f,
+                "ego position {axis} = {value_m:e} m is beyond +-{limit_m:e} m"
+            ),
+            Self::YawOutOfRange {
+                value_rad,
+                limit_rad,
+            } => write!(
+                f,
+                "ego yaw = {value_rad:e} rad is beyond +-{limit_rad:e} rad"
+            ),
             Self::NonFiniteMotion => f.write_str("ego motion is not finite"),
+            Self::AccelerationOutOfRange {
+                axis,
+                value_mps2,
+                limit_mps2,
+            } => write!(
+                f,
+                "ego acceleration {axis} = {value_mps2:e} m/s^2 is beyond +-{limit_mps2:e} m/s^2"
+            ),
+            Self::RotationRateOutOfRange {
+                axis,
+                value_radps,
+                limit_radps,
+            } => write!(
+                f,
+                "ego rotation rate {axis} = {value_radps:e} rad/s is beyond +-{limit_radps:e} rad/s"
+            ),
+            Self::VelocityOutOfRange {
+                axis,
+                value_mps,
+                limit_mps,
+            } => write!(
+                f,
+                "ego velocity {axis} = {value_mps:e} m/s is beyond +-{limit_mps:e} m/s"
+            ),
             Self::MissingCamera { camera } => write!(f, "camera {camera} delivered no image"),
             Self::WrongImageSize {
                 camera,

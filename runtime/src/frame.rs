@@ -3,9 +3,16 @@
 //!
 //! Images are u8 RGB, row-major HWC, at the model's resized and unpadded size
 //! (`image_w x image_h`), in camera model order (see `calibration::CAMERA_NAMES`).
+//!
+//! Sequence and timestamp must increase, and by no more than the [`FrameLimits`] gaps: a frame
+//! that jumps further ahead is refused *without* being adopted, so one corrupt message (say
+//! `sequence = u64::MAX`) cannot lock out every later, normal frame. A genuine restart of the
+//! counters goes through `SatMap::reset`.
+
+use core::fmt;
 
 use crate::calibration::NUM_CAMERAS;
-use crate::error::StepError;
+use crate::error::{InitError, StepError};
 use crate::model_dims::ModelDims;
 use crate::pose::{EgoMotion, EgoPose};
 
@@ -23,9 +30,11 @@ pub struct CameraImage<'a> {
 /// The input of one step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame<'a> {
-    /// Strictly increasing counter from the caller.
+    /// Counter from the caller: strictly increasing, by at most
+    /// [`FrameLimits::max_sequence_gap`] per successful step.
     pub sequence: u64,
-    /// Capture time, microseconds; strictly increasing.
+    /// Capture time, microseconds: strictly increasing, by at most
+    /// [`FrameLimits::max_timestamp_gap_us`] per successful step.
     pub timestamp_us: u64,
     /// Ego pose in the route frame.
     pub pose: EgoPose,
@@ -44,38 +53,141 @@ pub struct LastStep {
     pub timestamp_us: u64,
 }
 
-/// Check `frame` against the model's image size and the previous successful step.
+/// An axis of a pose or motion vector, for error context.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Axis {
+    /// x (route frame: east; ego frame: right).
+    X,
+    /// y (route frame: north; ego frame: forward).
+    Y,
+    /// z (ego frame: up).
+    Z,
+}
+
+impl Axis {
+    /// The three axes, in vector component order.
+    pub const ALL: [Self; 3] = [Self::X, Self::Y, Self::Z];
+
+    /// `"x"`, `"y"` or `"z"`.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::X => "x",
+            Self::Y => "y",
+            Self::Z => "z",
+        }
+    }
+}
+
+impl fmt::Display for Axis {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// What a frame must respect beyond finiteness and image sizes: how far its sequence counter and
+/// timestamp may jump ahead of the last successful step, and the plausible ranges of pose and
+/// ego motion. Every bound is inclusive; a float bound may be `INFINITY` (no bound).
 ///
-/// Order of checks: sequence, timestamp, pose, motion, then each camera in model order
-/// (missing, size, byte length).
+/// The defaults ([`FrameLimits::DEFAULT`]) suit a 2-20 Hz camera rig on a road vehicle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameLimits {
+    /// Largest accepted `sequence - previous sequence`, at least 1. Default 1000: 500 s of
+    /// dropped frames at 2 Hz, 50 s at 20 Hz, both past the timestamp gap, which is then the
+    /// bound that trips first.
+    pub max_sequence_gap: u64,
+    /// Largest accepted `timestamp_us - previous timestamp_us`, µs, at least 1. Default
+    /// 10_000_000 (10 s = 20 periods at 2 Hz): a longer pause is an outage, and the integrator
+    /// restarts with `SatMap::reset` rather than the runtime guessing.
+    pub max_timestamp_gap_us: u64,
+    /// Largest `|x|` and `|y|` of the route-frame position, metres. Default 1e7: beyond the
+    /// Earth's radius from the route pack origin, so only a corrupt pose exceeds it.
+    pub max_abs_position_m: f64,
+    /// Largest `|yaw|`, radians. Default 1e4 (about 1600 turns): the runtime wraps yaw itself,
+    /// so an unwrapped heading from a long drive still passes, while an absurd one (at 1e16 the
+    /// f64 spacing exceeds a full turn) does not.
+    pub max_abs_yaw_rad: f64,
+    /// Largest `|component|` of the velocity, m/s. Default 100 (360 km/h).
+    pub max_abs_velocity_mps: f32,
+    /// Largest `|component|` of the acceleration, m/s^2. Default 100 (about 10 g; the z
+    /// component carries gravity, 9.81 at rest).
+    pub max_abs_acceleration_mps2: f32,
+    /// Largest `|component|` of the rotation rate, rad/s. Default 10 (about 570 deg/s, well
+    /// past a spinning car).
+    pub max_abs_rotation_rate_radps: f32,
+}
+
+impl FrameLimits {
+    /// The documented defaults of every field.
+    pub const DEFAULT: Self = Self {
+        max_sequence_gap: 1000,
+        max_timestamp_gap_us: 10_000_000,
+        max_abs_position_m: 1e7,
+        max_abs_yaw_rad: 1e4,
+        max_abs_velocity_mps: 100.0,
+        max_abs_acceleration_mps2: 100.0,
+        max_abs_rotation_rate_radps: 10.0,
+    };
+
+    /// Check the limits themselves: gaps at least 1, float bounds positive and not NaN (a NaN
+    /// bound would silently accept everything, a zero one refuse every moving vehicle).
+    ///
+    /// # Errors
+    /// [`InitError::InvalidLimits`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), InitError> {
+        let bad = |field| Err(InitError::InvalidLimits { field });
+        if self.max_sequence_gap == 0 {
+            return bad("max_sequence_gap");
+        }
+        if self.max_timestamp_gap_us == 0 {
+            return bad("max_timestamp_gap_us");
+        }
+        if self.max_abs_position_m.is_nan() || self.max_abs_position_m <= 0.0 {
+            return bad("max_abs_position_m");
+        }
+        if self.max_abs_yaw_rad.is_nan() || self.max_abs_yaw_rad <= 0.0 {
+            return bad("max_abs_yaw_rad");
+        }
+        if self.max_abs_velocity_mps.is_nan() || self.max_abs_velocity_mps <= 0.0 {
+            return bad("max_abs_velocity_mps");
+        }
+        if self.max_abs_acceleration_mps2.is_nan() || self.max_abs_acceleration_mps2 <= 0.0 {
+            return bad("max_abs_acceleration_mps2");
+        }
+        if self.max_abs_rotation_rate_radps.is_nan() || self.max_abs_rotation_rate_radps <= 0.0 {
+            return bad("max_abs_rotation_rate_radps");
+        }
+        Ok(())
+    }
+}
+
+impl Default for FrameLimits {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Check `frame` against the model's image size, the limits and the previous successful step.
+///
+/// Order of checks: sequence (increasing, then gap), timestamp (increasing, then gap), pose
+/// (finite, then position x, y and yaw ranges), motion (finite, then acceleration, rotation
+/// rate and velocity ranges, each x, y, z), then each camera in model order (missing, size,
+/// byte length). Nothing is adopted here: the caller records the frame only once the whole step
+/// succeeded.
 ///
 /// # Errors
 /// The first failed check, as its own [`StepError`] variant with context.
 pub fn check_frame(
     frame: &Frame<'_>,
     dims: &ModelDims,
+    limits: &FrameLimits,
     last: Option<LastStep>,
 ) -> Result<(), StepError> {
     if let Some(last) = last {
-        if frame.sequence <= last.sequence {
-            return Err(StepError::SequenceNotIncreasing {
-                previous: last.sequence,
-                got: frame.sequence,
-            });
-        }
-        if frame.timestamp_us <= last.timestamp_us {
-            return Err(StepError::TimestampNotIncreasing {
-                previous_us: last.timestamp_us,
-                got_us: frame.timestamp_us,
-            });
-        }
+        check_counters(frame, limits, last)?;
     }
-    if !frame.pose.is_finite() {
-        return Err(StepError::NonFinitePose);
-    }
-    if !frame.motion.is_finite() {
-        return Err(StepError::NonFiniteMotion);
-    }
+    check_pose(&frame.pose, limits)?;
+    check_motion(&frame.motion, limits)?;
     for (camera, image) in frame.images.iter().enumerate() {
         let Some(image) = image else {
             return Err(StepError::MissingCamera { camera });
@@ -95,6 +207,110 @@ pub fn check_frame(
                 camera,
                 expected_bytes: dims.image_bytes(),
                 got_bytes: image.rgb.len(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Sequence and timestamp against the last successful step.
+fn check_counters(
+    frame: &Frame<'_>,
+    limits: &FrameLimits,
+    last: LastStep,
+) -> Result<(), StepError> {
+    if frame.sequence <= last.sequence {
+        return Err(StepError::SequenceNotIncreasing {
+            previous: last.sequence,
+            got: frame.sequence,
+        });
+    }
+    // No overflow: `frame.sequence > last.sequence` here.
+    if frame.sequence - last.sequence > limits.max_sequence_gap {
+        return Err(StepError::SequenceGapTooLarge {
+            previous: last.sequence,
+            got: frame.sequence,
+            max_gap: limits.max_sequence_gap,
+        });
+    }
+    if frame.timestamp_us <= last.timestamp_us {
+        return Err(StepError::TimestampNotIncreasing {
+            previous_us: last.timestamp_us,
+            got_us: frame.timestamp_us,
+        });
+    }
+    if frame.timestamp_us - last.timestamp_us > limits.max_timestamp_gap_us {
+        return Err(StepError::TimestampGapTooLarge {
+            previous_us: last.timestamp_us,
+            got_us: frame.timestamp_us,
+            max_gap_us: limits.max_timestamp_gap_us,
+        });
+    }
+    Ok(())
+}
+
+/// Pose finite, then inside the position and yaw ranges.
+fn check_pose(pose: &EgoPose, limits: &FrameLimits) -> Result<(), StepError> {
+    if !pose.is_finite() {
+        return Err(StepError::NonFinitePose);
+    }
+    let limit_m = limits.max_abs_position_m;
+    for (axis, value_m) in [(Axis::X, pose.position_m.x), (Axis::Y, pose.position_m.y)] {
+        if value_m.abs() > limit_m {
+            return Err(StepError::PositionOutOfRange {
+                axis,
+                value_m,
+                limit_m,
+            });
+        }
+    }
+    if pose.yaw_rad.abs() > limits.max_abs_yaw_rad {
+        return Err(StepError::YawOutOfRange {
+            value_rad: pose.yaw_rad,
+            limit_rad: limits.max_abs_yaw_rad,
+        });
+    }
+    Ok(())
+}
+
+/// Motion finite, then each component inside its range (CAN-bus order).
+fn check_motion(motion: &EgoMotion, limits: &FrameLimits) -> Result<(), StepError> {
+    if !motion.is_finite() {
+        return Err(StepError::NonFiniteMotion);
+    }
+    let limit_mps2 = limits.max_abs_acceleration_mps2;
+    for (axis, value_mps2) in Axis::ALL
+        .into_iter()
+        .zip(motion.acceleration_mps2.to_array())
+    {
+        if value_mps2.abs() > limit_mps2 {
+            return Err(StepError::AccelerationOutOfRange {
+                axis,
+                value_mps2,
+                limit_mps2,
+            });
+        }
+    }
+    let limit_radps = limits.max_abs_rotation_rate_radps;
+    for (axis, value_radps) in Axis::ALL
+        .into_iter()
+        .zip(motion.rotation_rate_radps.to_array())
+    {
+        if value_radps.abs() > limit_radps {
+            return Err(StepError::RotationRateOutOfRange {
+                axis,
+                value_radps,
+                limit_radps,
+            });
+        }
+    }
+    let limit_mps = limits.max_abs_velocity_mps;
+    for (axis, value_mps) in Axis::ALL.into_iter().zip(motion.velocity_mps.to_array()) {
+        if value_mps.abs() > limit_mps {
+            return Err(StepError::VelocityOutOfRange {
+                axis,
+                value_mps,
+                limit_mps,
             });
         }
     }

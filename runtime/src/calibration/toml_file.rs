@@ -40,7 +40,8 @@ pub enum CalibrationFileError {
         /// Name found.
         got: String,
     },
-    /// A camera's rotation quaternion is not of unit length (within 1e-6).
+    /// A camera's rotation quaternion is not of unit length (within
+    /// [`ROTATION_NORM_TOLERANCE`](super::ROTATION_NORM_TOLERANCE)).
     #[error("camera {name}: rotation_wxyz has norm {norm}, expected 1 (within 1e-6)")]
     NonUnitRotation {
         /// Camera name.
@@ -48,7 +49,9 @@ pub enum CalibrationFileError {
         /// Norm found.
         norm: f64,
     },
-    /// Another invalid value (non-finite number, non-positive focal length, raw size zero).
+    /// Another invalid value: any other check of
+    /// [`Calibration::validate`] (non-finite number, focal length out of range, principal
+    /// point outside the image, camera too far from the ego origin).
     #[error("camera {name}: {fault}")]
     InvalidCamera {
         /// Camera name.
@@ -88,9 +91,6 @@ struct CameraTable {
 /// non-unit rotation or any other invalid value (see [`CalibrationFileError`]).
 pub fn from_toml_str(text: &str) -> Result<Calibration, CalibrationFileError> {
     let file: FileTable = toml::from_str(text)?;
-    if file.raw_width_px == 0 || file.raw_height_px == 0 {
-        return Err(CalibrationFileError::ZeroRawSize);
-    }
     if file.camera.len() != NUM_CAMERAS {
         return Err(CalibrationFileError::CameraCount {
             got: file.camera.len(),
@@ -123,13 +123,15 @@ pub fn from_toml_str(text: &str) -> Result<Calibration, CalibrationFileError> {
         raw_height_px: file.raw_height_px,
         cameras,
     };
+    // The value checks are the runtime's own (`Calibration::validate`, also run by `SatMap::new`
+    // and `recalibrate`), so a file that loads is a calibration the runtime accepts.
     if let Err((index, fault)) = calibration.validate() {
-        let name = CAMERA_NAMES[index];
+        let name = CAMERA_NAMES.get(index).copied().unwrap_or("?");
         return Err(match fault {
-            CalibrationFault::NonUnitRotation => CalibrationFileError::NonUnitRotation {
-                name,
-                norm: calibration.cameras[index].rotation.length(),
-            },
+            CalibrationFault::ZeroRawSize => CalibrationFileError::ZeroRawSize,
+            CalibrationFault::NonUnitRotation { norm } => {
+                CalibrationFileError::NonUnitRotation { name, norm }
+            }
             fault => CalibrationFileError::InvalidCamera { name, fault },
         });
     }
@@ -151,6 +153,7 @@ pub fn from_toml_file(path: &Path) -> Result<Calibration, CalibrationFileError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calibration::CalibrationField;
 
     const RIG: &str = include_str!("../../../models/calibration/nuscenes_like.toml");
 
@@ -235,14 +238,19 @@ mod tests {
             from_toml_str(&bad).unwrap_err(),
             CalibrationFileError::InvalidCamera {
                 name: "CAM_FRONT",
-                fault: CalibrationFault::NonPositiveFocal
+                fault: CalibrationFault::NonPositiveFocal {
+                    field: CalibrationField::FxPx,
+                    value_px: -1266.4
+                }
             }
         ));
         let bad = RIG.replacen("fx_px = 1266.4", "fx_px = nan", 1);
         assert!(matches!(
             from_toml_str(&bad).unwrap_err(),
             CalibrationFileError::InvalidCamera {
-                fault: CalibrationFault::NonFinite,
+                fault: CalibrationFault::NonFinite {
+                    field: CalibrationField::FxPx
+                },
                 ..
             }
         ));
@@ -254,6 +262,90 @@ mod tests {
         assert!(matches!(
             from_toml_file(Path::new("/nonexistent/rig.toml")).unwrap_err(),
             CalibrationFileError::Io { .. }
+        ));
+    }
+
+    /// The range checks of `Calibration::validate` reach the file loader, naming camera, field
+    /// and value.
+    #[test]
+    fn rejects_out_of_range_values() {
+        let bad = RIG.replacen("fx_px = 1266.4", "fx_px = 1e300", 1);
+        let err = from_toml_str(&bad).unwrap_err();
+        match err {
+            CalibrationFileError::InvalidCamera {
+                name: "CAM_FRONT",
+                fault:
+                    CalibrationFault::FocalOutOfRange {
+                        field: CalibrationField::FxPx,
+                        value_px,
+                        min_px,
+                        max_px,
+                    },
+            } => {
+                assert_eq!(value_px, 1e300);
+                assert_eq!((min_px, max_px), (80.0, 160_000.0));
+            }
+            ref other => panic!("unexpected {other:?}"),
+        }
+        let text = err.to_string();
+        assert!(
+            text.contains("CAM_FRONT") && text.contains("fx_px") && text.contains("1e300"),
+            "{text}"
+        );
+
+        // fy is judged against the raw height: 900 * 0.05 = 45 px is the smallest.
+        let bad = RIG.replacen("fy_px = 1266.4", "fy_px = 44.0", 1);
+        assert!(matches!(
+            from_toml_str(&bad).unwrap_err(),
+            CalibrationFileError::InvalidCamera {
+                name: "CAM_FRONT",
+                fault: CalibrationFault::FocalOutOfRange {
+                    field: CalibrationField::FyPx,
+                    ..
+                }
+            }
+        ));
+        let bad = RIG.replacen("cy_px = 491.5", "cy_px = 900.5", 1);
+        assert!(matches!(
+            from_toml_str(&bad).unwrap_err(),
+            CalibrationFileError::InvalidCamera {
+                name: "CAM_FRONT",
+                fault: CalibrationFault::PrincipalPointOutsideImage {
+                    field: CalibrationField::CyPx,
+                    max_px: 900.0,
+                    ..
+                }
+            }
+        ));
+        let bad = RIG.replacen("cx_px = 816.3", "cx_px = -0.5", 1);
+        assert!(matches!(
+            from_toml_str(&bad).unwrap_err(),
+            CalibrationFileError::InvalidCamera {
+                fault: CalibrationFault::PrincipalPointOutsideImage {
+                    field: CalibrationField::CxPx,
+                    ..
+                },
+                ..
+            }
+        ));
+        // The back camera 10.5 m up.
+        let bad = RIG.replacen(
+            "translation_m = [-0.000, 0.030, 1.570]",
+            "translation_m = [-0.000, 0.030, 10.5]",
+            1,
+        );
+        assert_ne!(bad, RIG);
+        assert!(matches!(
+            from_toml_str(&bad).unwrap_err(),
+            CalibrationFileError::InvalidCamera {
+                name: "CAM_BACK",
+                fault: CalibrationFault::CameraTooFar { max_m: 10.0, .. }
+            }
+        ));
+        let bad = RIG.replacen("raw_height_px = 900", "raw_height_px = 0", 1);
+        assert!(matches!(
+            from_toml_str(&bad).unwrap_err(),
+            CalibrationFileError::ZeroRawSize
         ));
     }
 }

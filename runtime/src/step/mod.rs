@@ -8,6 +8,10 @@
 //! digest. Failure at any point returns a [`StepError`] and leaves the last published map, the
 //! last sequence and timestamp untouched; intermediate buffers then hold the partial step.
 //! `step` allocates nothing.
+//!
+//! The frame checks bound how far sequence and timestamp may jump ([`FrameLimits`]), so a frame
+//! cannot lock the runtime out: one that jumps too far is refused and not adopted.
+//! [`SatMap::reset`] is the explicit restart after which any first frame is accepted again.
 
 mod buffers;
 
@@ -19,7 +23,7 @@ use crate::capacity::CAN_BUS_LEN;
 use crate::decode::decode;
 use crate::engine::{Engine, Stage};
 use crate::error::{InitError, StepError};
-use crate::frame::{Frame, LastStep, check_frame};
+use crate::frame::{Frame, FrameLimits, LastStep, check_frame};
 use crate::gkt::{Lut, gather_sum};
 use crate::map_frame::{self, Health, MapFrame, SatellitePrior};
 use crate::model_dims::ModelDims;
@@ -32,25 +36,42 @@ pub struct SatMap<E: Engine, S: SatelliteSource> {
     dims: ModelDims,
     lut: Lut,
     buffers: StepBuffers,
+    limits: FrameLimits,
     output: MapFrame,
+    /// `None` until the first successful step, and again after [`SatMap::reset`].
     last: Option<LastStep>,
 }
 
 impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// Check the engine's dimensions and the calibration, build the look-up table and reserve
-    /// every buffer.
+    /// every buffer; frames are checked against [`FrameLimits::DEFAULT`].
     ///
     /// # Errors
     /// [`InitError::Dims`], [`InitError::RegionTooSmall`] (a region of `memory_layout.toml`
-    /// cannot hold the model's buffers), [`InitError::InvalidCalibration`] or
-    /// [`InitError::OutOfMemory`].
+    /// cannot hold the model's buffers), [`InitError::InvalidCalibration`] (see
+    /// [`Calibration::validate`]) or [`InitError::OutOfMemory`].
     pub fn new(engine: E, calibration: &Calibration, satellite: S) -> Result<Self, InitError> {
+        Self::with_limits(engine, calibration, satellite, FrameLimits::DEFAULT)
+    }
+
+    /// As [`SatMap::new`], with frames checked against `limits`.
+    ///
+    /// # Errors
+    /// [`InitError::InvalidLimits`] (see [`FrameLimits::validate`]), else as [`SatMap::new`].
+    pub fn with_limits(
+        engine: E,
+        calibration: &Calibration,
+        satellite: S,
+        limits: FrameLimits,
+    ) -> Result<Self, InitError> {
+        limits.validate()?;
         let dims = engine.dims().clone();
         dims.validate()?;
         crate::capacity::check_regions(&dims)?;
         let lut = Lut::new(&dims, calibration)?;
         Ok(Self {
             buffers: StepBuffers::new(&dims)?,
+            limits,
             output: MapFrame::default(),
             last: None,
             engine,
@@ -66,7 +87,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// An input check, an engine stage or a non-finite decoder output; see [`StepError`].
     /// The runtime stays usable: the next good frame steps normally.
     pub fn step(&mut self, frame: &Frame<'_>) -> Result<&MapFrame, StepError> {
-        check_frame(frame, &self.dims, self.last)?;
+        check_frame(frame, &self.dims, &self.limits, self.last)?;
         let b = &mut self.buffers;
         b.can_bus = can_bus(&frame.pose, &frame.motion);
         self.engine
@@ -137,9 +158,29 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// is allocated.
     ///
     /// # Errors
-    /// [`InitError::InvalidCalibration`]; the previous table stays in use then.
+    /// [`InitError::InvalidCalibration`] (see [`Calibration::validate`]); the previous table
+    /// stays in use then.
     pub fn recalibrate(&mut self, calibration: &Calibration) -> Result<(), InitError> {
         self.lut.rebuild(calibration)
+    }
+
+    /// Restart the frame counters: forget the last successful step, so that the next frame is
+    /// accepted whatever its sequence and timestamp, as after [`SatMap::new`]. For a genuine
+    /// restart of the caller's counters (a reboot of the camera rig, a pause longer than
+    /// [`FrameLimits::max_timestamp_gap_us`]), which the gap checks otherwise refuse; also the
+    /// way out if the first frame after init carried corrupt counters, since a first frame is
+    /// never refused for its counters.
+    ///
+    /// [`SatMap::last_map`] is `None` until the next successful step. Calibration, limits,
+    /// engine, satellite source and buffers are kept; nothing is allocated.
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+
+    /// The limits frames are checked against.
+    #[must_use]
+    pub const fn limits(&self) -> &FrameLimits {
+        &self.limits
     }
 
     /// Flag the last published map as late (the caller measures the deadline).
@@ -252,5 +293,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     }
 }
 
+#[cfg(test)]
+mod hardening_tests;
 #[cfg(test)]
 mod tests;
