@@ -28,6 +28,8 @@ enum Command {
     BuildPack(satmap_sim::cli::build_pack::Args),
     /// Generate a seeded synthetic drive as a scenario folder (tiles, route, frames, GT).
     SynthDrive(satmap_sim::cli::synth_drive::Args),
+    /// Training data for `models/`: synthetic drives split by world seed (train / val / test).
+    ExportDataset(satmap_sim::cli::export_dataset::Args),
     /// Chamfer-AP of a MapTR-layout predictions file against a ground-truth file.
     Evaluate(satmap_sim::cli::evaluate::Args),
     /// Pictures of a scenario: satellite crop with GT and predictions, contact sheet, GeoJSON.
@@ -45,6 +47,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::BuildPack(args) => satmap_sim::cli::build_pack::run(&args),
         Command::SynthDrive(args) => satmap_sim::cli::synth_drive::run(&args),
+        Command::ExportDataset(args) => satmap_sim::cli::export_dataset::run(&args),
         Command::Evaluate(args) => satmap_sim::cli::evaluate::run(&args),
         Command::Render(args) => satmap_sim::cli::render::run(&args),
         Command::Drive(args) => {

@@ -4,6 +4,7 @@ pub mod build_pack;
 pub mod check_bundle;
 pub mod drive;
 pub mod evaluate;
+pub mod export_dataset;
 pub mod memory_map;
 pub mod render;
 pub mod synth_drive;

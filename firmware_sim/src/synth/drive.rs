@@ -10,10 +10,11 @@ use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};
 use serde::{Deserialize, Serialize};
 
 use super::camera_render::CameraRig;
-use super::ground_raster::{GroundRaster, RasterError, WorldRasters, paint_world};
+use super::ground_raster::{GroundRaster, RasterError, WorldRasters, paint_world_with_imagery};
+use super::imagery::{ImageryConfig, ImageryErrors, draw_errors};
 use super::lighting::{Lighting, LightingPreset};
 use super::patch_gt::{Patch, ground_truth};
-use super::world::{World, WorldConfig};
+use super::world::{OccluderKind, World, WorldConfig};
 use crate::eval::MapVector;
 
 /// The nuScenes-like rig of `models/calibration/nuscenes_like.toml`, built in.
@@ -22,6 +23,10 @@ pub const NUSCENES_LIKE_CALIBRATION_TOML: &str =
 
 /// Standard gravity, reported on the IMU z axis like nuScenes' CAN bus, m/s^2.
 pub const GRAVITY_MPS2: f32 = 9.81;
+
+/// Distance from a tree's or parked car's footprint to a ground-truth element within which a
+/// frame counts as occluded, metres.
+pub const OCCLUSION_NEAR_M: f64 = 0.5;
 
 /// First frame's timestamp, microseconds.
 pub const START_TIMESTAMP_US: u64 = 1_000_000;
@@ -59,6 +64,9 @@ pub struct DriveConfig {
     pub raster_gsd_m: f64,
     /// Main road length, metres (lengthened when the drive needs more).
     pub route_length_m: f64,
+    /// How far the satellite imagery is from the truth (`synth::imagery`).
+    #[serde(default)]
+    pub imagery: ImageryConfig,
 }
 
 impl Default for DriveConfig {
@@ -72,6 +80,7 @@ impl Default for DriveConfig {
             lighting: None,
             raster_gsd_m: 0.2,
             route_length_m: 600.0,
+            imagery: ImageryConfig::default(),
         }
     }
 }
@@ -105,6 +114,7 @@ pub struct SyntheticDrive {
     lighting: Lighting,
     lighting_preset: LightingPreset,
     start_s_m: f64,
+    imagery_errors: ImageryErrors,
 }
 
 impl SyntheticDrive {
@@ -136,6 +146,9 @@ impl SyntheticDrive {
         if !calibration.is_valid() {
             return bad("calibration is not valid");
         }
+        if let Some(why) = config.imagery.check() {
+            return bad(why);
+        }
         let start_s_m = 30.0;
         let duration_s = config.num_frames as f64 / config.frame_rate_hz;
         let needed_m = start_s_m + duration_s * config.mean_speed_mps * 1.2 + 60.0;
@@ -144,7 +157,18 @@ impl SyntheticDrive {
             ..WorldConfig::default()
         };
         let world = World::generate(seed, &world_config);
-        let rasters = paint_world(&world, config.raster_gsd_m, seed)?;
+        // The rotation error turns about the middle of the drive, so every crop of the drive
+        // sees about the drawn offset.
+        let mid_s_m = start_s_m + 0.5 * duration_s * config.mean_speed_mps;
+        let pivot_m = world.main.point_at(mid_s_m, world.ego_lateral_m);
+        let (imagery_errors, imaged) = draw_errors(&world, &config.imagery, seed, pivot_m);
+        let rasters = paint_world_with_imagery(
+            &world,
+            imaged.as_ref(),
+            &imagery_errors.registration,
+            config.raster_gsd_m,
+            seed,
+        )?;
         let rig = CameraRig::new(&calibration, config.image_width_px, config.image_height_px);
         let lighting_preset = config
             .lighting
@@ -159,6 +183,7 @@ impl SyntheticDrive {
             rasters,
             rig,
             start_s_m,
+            imagery_errors,
         })
     }
 
@@ -190,6 +215,55 @@ impl SyntheticDrive {
     #[must_use]
     pub fn satellite(&self) -> &GroundRaster {
         &self.rasters.satellite
+    }
+
+    /// The satellite imagery's errors drawn for this drive.
+    #[must_use]
+    pub fn imagery_errors(&self) -> &ImageryErrors {
+        &self.imagery_errors
+    }
+
+    /// Share (0..1) of the ground truth's length at `pose` that lies on or within
+    /// `OCCLUSION_NEAR_M` of a tree or a parked car: hidden from the cameras at some angle and,
+    /// from above, from the satellite (canopy, car roof). Buildings stand behind the sidewalks
+    /// and never cover an element. A footprint is taken as the disc of its larger half size;
+    /// the length is measured on points every 0.25 m.
+    #[must_use]
+    pub fn occluded_share(&self, pose: &EgoPose, ground_truth: &[MapVector]) -> f64 {
+        let (sin, cos) = pose.yaw_rad.sin_cos();
+        let to_ego = |p: DVec2| {
+            let d = p - pose.position_m;
+            DVec2::new(d.x * sin - d.y * cos, d.x * cos + d.y * sin)
+        };
+        let discs: Vec<(DVec2, f64)> = self
+            .world
+            .occluders
+            .iter()
+            .filter(|o| o.kind != OccluderKind::Building)
+            .map(|o| {
+                let r = o.half_width_m.max(o.half_length_m) + OCCLUSION_NEAR_M;
+                (to_ego(o.centre_m), r * r)
+            })
+            .collect();
+        let (mut total, mut hidden) = (0usize, 0usize);
+        for v in ground_truth {
+            for w in v.points_m.windows(2) {
+                let (a, b) = (DVec2::from(w[0]), DVec2::from(w[1]));
+                let steps = ((b - a).length() / 0.25).ceil().max(1.0) as usize;
+                for k in 0..steps {
+                    let p = a.lerp(b, (k as f64 + 0.5) / steps as f64);
+                    total += 1;
+                    if discs.iter().any(|&(c, r2)| (p - c).length_squared() <= r2) {
+                        hidden += 1;
+                    }
+                }
+            }
+        }
+        if total == 0 {
+            0.0
+        } else {
+            hidden as f64 / total as f64
+        }
     }
 
     /// The lighting actually used.

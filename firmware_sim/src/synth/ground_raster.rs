@@ -11,6 +11,7 @@ use tiny_skia::{
     Color, FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, Stroke, StrokeDash, Transform,
 };
 
+use super::imagery::Registration;
 use super::world::{DividerPaint, OccluderKind, World};
 
 /// One raster.
@@ -33,7 +34,7 @@ pub struct GroundRaster {
 }
 
 /// Errors painting the rasters.
-#[derive(Debug, thiserror::Error)]
+#[derive(Clone, Debug, thiserror::Error)]
 pub enum RasterError {
     /// The world is too large for one raster at this resolution.
     #[error("world raster of {width_px} x {height_px} px at {gsd_m} m/px is too large")]
@@ -93,9 +94,22 @@ pub struct WorldRasters {
     pub shadow_dir: DVec2,
 }
 
-/// Paint both rasters of `world` at `gsd_m` metres per pixel; `seed` drives the texture noise
-/// and sun direction.
+/// Paint both rasters of `world` at `gsd_m` metres per pixel with perfect imagery; `seed`
+/// drives the texture noise and sun direction.
 pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters, RasterError> {
+    paint_world_with_imagery(world, None, &Registration::NONE, gsd_m, seed)
+}
+
+/// Paint both rasters of `world`: the ground the cameras see as the world is now, and the
+/// satellite view of `imaged` (the world when the imagery was taken; `None` = now) displaced by
+/// `registration` (see `synth::imagery`).
+pub fn paint_world_with_imagery(
+    world: &World,
+    imaged: Option<&World>,
+    registration: &Registration,
+    gsd_m: f64,
+    seed: u64,
+) -> Result<WorldRasters, RasterError> {
     let (lo, hi) = world.bounds_m;
     let width_px = ((hi.x - lo.x) / gsd_m).ceil().max(1.0) as usize;
     let height_px = ((hi.y - lo.y) / gsd_m).ceil().max(1.0) as usize;
@@ -107,8 +121,12 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
     if width_px.saturating_mul(height_px) > MAX_RASTER_PIXELS {
         return Err(too_large);
     }
-    let mut pixmap = Pixmap::new(width_px as u32, height_px as u32).ok_or(too_large)?;
-    pixmap.fill(Color::from_rgba8(GRASS[0], GRASS[1], GRASS[2], 255));
+    let new_pixmap = || {
+        let mut pixmap = Pixmap::new(width_px as u32, height_px as u32)?;
+        pixmap.fill(Color::from_rgba8(GRASS[0], GRASS[1], GRASS[2], 255));
+        Some(pixmap)
+    };
+    let mut pixmap = new_pixmap().ok_or(too_large.clone())?;
     // Route (x east, y north) -> pixel (col right, row down).
     let to_px = Transform::from_row(
         (1.0 / gsd_m) as f32,
@@ -118,11 +136,55 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
         (-lo.x / gsd_m) as f32,
         (hi.y / gsd_m) as f32,
     );
+    // Sun from a seeded azimuth; shadows fall away from it.
+    let shadow_angle = (hash01(seed, 17, 3) * std::f64::consts::TAU as f32) as f64;
+    let shadow_dir = DVec2::from_angle(shadow_angle);
+    paint_ground(&mut pixmap, world, shadow_dir, to_px);
+    let mut ground = to_raster(&pixmap, lo, hi, gsd_m);
+
+    // Satellite: roofs, canopies and car roofs on top of the ground (of the imaged world,
+    // displaced by the registration error).
+    if imaged.is_some() || !registration.is_none() {
+        pixmap = new_pixmap().ok_or(too_large)?;
+        let t = to_px.pre_concat(registration_transform(registration));
+        paint_ground(&mut pixmap, imaged.unwrap_or(world), shadow_dir, t);
+        paint_roofs(&mut pixmap, world, t);
+    } else {
+        paint_roofs(&mut pixmap, world, to_px);
+    }
+    let mut satellite = to_raster(&pixmap, lo, hi, gsd_m);
+    add_texture_noise(&mut ground, seed);
+    add_texture_noise(&mut satellite, seed ^ 0x5a5a);
+    Ok(WorldRasters {
+        ground,
+        satellite,
+        shadow_dir,
+    })
+}
+
+/// The registration error as a route-frame transform (true point -> imaged point).
+fn registration_transform(r: &Registration) -> Transform {
+    let (sin, cos) = r.yaw_rad.sin_cos();
+    let c = r.pivot_m;
+    let tx = c.x - (cos * c.x - sin * c.y) + r.offset_m.x;
+    let ty = c.y - (sin * c.x + cos * c.y) + r.offset_m.y;
+    Transform::from_row(
+        cos as f32,
+        sin as f32,
+        -sin as f32,
+        cos as f32,
+        tx as f32,
+        ty as f32,
+    )
+}
+
+/// Sidewalks, asphalt, kerbs, markings and the occluders' shadows, through `to_px`.
+fn paint_ground(pixmap: &mut Pixmap, world: &World, shadow_dir: DVec2, to_px: Transform) {
     let cfg = world.config;
     let walk = cfg.sidewalk_width_m;
 
     let sidewalk = world.main_polygon(walk);
-    fill(&mut pixmap, &sidewalk, [168, 166, 158, 255], to_px);
+    fill(pixmap, &sidewalk, [168, 166, 158, 255], to_px);
     for road in &world.side_roads {
         let len = road.centerline.length_m();
         let w = road.half_width_m + walk;
@@ -137,10 +199,10 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
                     .rev(),
             )
             .collect();
-        fill(&mut pixmap, &poly, [168, 166, 158, 255], to_px);
+        fill(pixmap, &poly, [168, 166, 158, 255], to_px);
     }
     let asphalt = [68, 70, 74, 255];
-    fill(&mut pixmap, &world.main_polygon(0.0), asphalt, to_px);
+    fill(pixmap, &world.main_polygon(0.0), asphalt, to_px);
     for road in &world.side_roads {
         let len = road.centerline.length_m();
         let w = road.half_width_m;
@@ -155,29 +217,22 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
                     .rev(),
             )
             .collect();
-        fill(&mut pixmap, &poly, asphalt, to_px);
+        fill(pixmap, &poly, asphalt, to_px);
     }
     for f in &world.corner_fills {
-        fill(&mut pixmap, f, asphalt, to_px);
+        fill(pixmap, f, asphalt, to_px);
     }
     for b in &world.boundaries {
-        stroke(&mut pixmap, b, [196, 194, 186, 255], 0.25, None, to_px);
+        stroke(pixmap, b, [196, 194, 186, 255], 0.25, None, to_px);
     }
     for d in &world.dividers {
         match d.paint {
             DividerPaint::SolidCentre => {
-                stroke(
-                    &mut pixmap,
-                    &d.points_m,
-                    [222, 186, 60, 255],
-                    0.2,
-                    None,
-                    to_px,
-                );
+                stroke(pixmap, &d.points_m, [222, 186, 60, 255], 0.2, None, to_px);
             }
             DividerPaint::DashedLane => {
                 stroke(
-                    &mut pixmap,
+                    pixmap,
                     &d.points_m,
                     [232, 232, 228, 255],
                     0.18,
@@ -197,7 +252,7 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
             let a = c.road_dir * (c.length_along_m / 2.0);
             let w = across * 0.25;
             fill(
-                &mut pixmap,
+                pixmap,
                 &[
                     centre - a - w,
                     centre + a - w,
@@ -210,9 +265,6 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
         }
     }
 
-    // Sun from a seeded azimuth; shadows fall away from it.
-    let shadow_angle = (hash01(seed, 17, 3) * std::f64::consts::TAU as f32) as f64;
-    let shadow_dir = DVec2::from_angle(shadow_angle);
     for o in &world.occluders {
         let footprint = o.corners_m();
         let offset = shadow_dir * (o.height_m * 0.7);
@@ -223,22 +275,23 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
             .collect();
         let hull = convex_hull(&mut pts);
         let alpha = if o.kind == OccluderKind::Tree { 70 } else { 95 };
-        fill(&mut pixmap, &hull, [10, 12, 20, alpha], to_px);
+        fill(pixmap, &hull, [10, 12, 20, alpha], to_px);
     }
-    let mut ground = to_raster(&pixmap, lo, hi, gsd_m);
+}
 
-    // Satellite: roofs, canopies and car roofs on top of the ground.
+/// Roofs, tree canopies and car roofs: what a satellite sees above the ground.
+fn paint_roofs(pixmap: &mut Pixmap, world: &World, to_px: Transform) {
     for o in &world.occluders {
         let c = o.colour.map(|v| (v * 255.0).clamp(0.0, 255.0) as u8);
         let corners = o.corners_m();
         match o.kind {
             OccluderKind::Building => {
                 let roof = [c[0] / 2 + 40, c[1] / 2 + 38, c[2] / 2 + 36, 255];
-                fill(&mut pixmap, &corners, roof, to_px);
+                fill(pixmap, &corners, roof, to_px);
                 let mut ring = corners.to_vec();
                 ring.push(corners[0]);
                 stroke(
-                    &mut pixmap,
+                    pixmap,
                     &ring,
                     [c[0] / 3, c[1] / 3, c[2] / 3, 255],
                     0.6,
@@ -264,13 +317,13 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
                 }
             }
             OccluderKind::ParkedCar => {
-                fill(&mut pixmap, &corners, [c[0], c[1], c[2], 255], to_px);
+                fill(pixmap, &corners, [c[0], c[1], c[2], 255], to_px);
                 // Windscreen band across the middle of the car.
                 let a = o.axis * 0.45;
                 let x = -o.axis.perp() * (o.half_width_m * 0.8);
                 let m = o.centre_m + o.axis * 0.5;
                 fill(
-                    &mut pixmap,
+                    pixmap,
                     &[m - x - a, m + x - a, m + x + a, m - x + a],
                     [30, 34, 40, 255],
                     to_px,
@@ -278,14 +331,6 @@ pub fn paint_world(world: &World, gsd_m: f64, seed: u64) -> Result<WorldRasters,
             }
         }
     }
-    let mut satellite = to_raster(&pixmap, lo, hi, gsd_m);
-    add_texture_noise(&mut ground, seed);
-    add_texture_noise(&mut satellite, seed ^ 0x5a5a);
-    Ok(WorldRasters {
-        ground,
-        satellite,
-        shadow_dir,
-    })
 }
 
 impl World {

@@ -5,6 +5,7 @@
 //! - `centerline`: straights and arcs, evaluated at any arc length and lateral offset.
 //! - `world`: road network, ground-truth polylines in the route frame, occluders.
 //! - `ground_raster`: the top-down ground and satellite rasters, painted once per world.
+//! - `imagery`: registration error and staleness of the satellite imagery.
 //! - `camera_render`: six camera images per frame by ray casting onto the ground plane.
 //! - `lighting`: day / dusk / rain-like conditions.
 //! - `patch_gt`: ground truth of a frame in the ego frame, cut to the patch.
@@ -20,6 +21,7 @@ pub mod camera_render;
 pub mod centerline;
 pub mod drive;
 pub mod ground_raster;
+pub mod imagery;
 pub mod lighting;
 pub mod patch_gt;
 pub mod scenario;
@@ -27,6 +29,7 @@ pub mod slippy_tiles;
 pub mod world;
 
 pub use drive::{DriveConfig, SynthError, SynthFrame, SyntheticDrive, WorldSatellite};
+pub use imagery::{ImageryConfig, ImageryErrors, Registration};
 pub use lighting::LightingPreset;
 pub use patch_gt::Patch;
 pub use scenario::{Scenario, ScenarioManifest, ScenarioPlacement, write_scenario};
