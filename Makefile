@@ -7,7 +7,7 @@ PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-python lint nostd venv
+.PHONY: demo test test-rust test-python lint nostd venv train
 
 demo:
 	$(CARGO) run -p satmap-sim -- drive --out out/demo
@@ -36,3 +36,24 @@ $(PY_VENV)/.installed: models/pyproject.toml
 
 test-python: venv
 	$(PY) -m pytest models -q
+
+# Reproduces the trained default model (never run in CI; ~80 min on this 2-core machine):
+# the synthetic dataset (200 drives x 24 frames, split by world seed), the camera-only and the
+# camera + satellite model trained side by side with the same budget (one thread each), the
+# held-out report, then the committed weights, bundle and goldens. Resumable: run it again after
+# an interruption and each step continues from what is on disk.
+DATA ?= out/dataset
+RUNS ?= out/runs
+TRAIN_FLAGS ?= --steps 2000 --batch 4 --lr 6e-4 --warmup 150 --threads 1
+train: venv
+	$(CARGO) build --release -p satmap-sim
+	./target/release/satmap-sim export-dataset --out $(DATA)
+	$(PY) -m satmap_ref.train --data $(DATA) --mode camera --out $(RUNS)/camera $(TRAIN_FLAGS) & \
+	  $(PY) -m satmap_ref.train --data $(DATA) --mode sat --out $(RUNS)/sat $(TRAIN_FLAGS); \
+	  s=$$?; wait $$! && test $$s -eq 0
+	$(PY) -m satmap_ref.train.report --data $(DATA) --split test --sim target/release/satmap-sim \
+	  --run camera=$(RUNS)/camera/weights.safetensors --run sat=$(RUNS)/sat/weights.safetensors \
+	  --log camera=$(RUNS)/camera/log.jsonl --log sat=$(RUNS)/sat/log.jsonl --out docs/training
+	cp $(RUNS)/sat/weights.safetensors models/weights/test_sat.safetensors
+	cp $(RUNS)/camera/weights.safetensors models/weights/test_camera.safetensors
+	$(PY) -m satmap_ref.golden --take-input $(DATA)

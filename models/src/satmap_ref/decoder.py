@@ -157,3 +157,26 @@ class MapDecoderStage(nn.Module):
         inst = h.view(cfg.num_vec, cfg.num_pts, d).mean(1)
         logits = self.cls_last(inst)
         return logits, ref.view(cfg.num_vec, cfg.num_pts, 2)
+
+    def forward_layers(self, camera_bev: torch.Tensor, satellite_bev: torch.Tensor,
+                       cls_branches: nn.ModuleList) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Training view (not exported): (class_logits, points) of every decoder layer, layer l
+        classified by `cls_branches[l]`, for MapTR's auxiliary losses. As in MapTR's decoder the
+        reference points handed to layer l > 0 are detached; values equal `forward`'s, whose
+        outputs are the last entry."""
+        cfg = self.cfg
+        d = cfg.embed_dims
+        x = torch.cat([camera_bev, satellite_bev], dim=-1).permute(2, 0, 1).unsqueeze(0)
+        value = self.fuser(x)[0].reshape(d, cfg.bev_h * cfg.bev_w).transpose(0, 1)
+        emb = (self.instance_embedding.weight.unsqueeze(1)
+               + self.pts_embedding.weight.unsqueeze(0)).reshape(cfg.num_vec * cfg.num_pts, 2 * d)
+        pos, h = emb[:, :d], emb[:, d:]
+        ref = self.reference_points(pos).sigmoid()
+        outs = []
+        for lid, layer in enumerate(self.decoder.layers):
+            h = layer(h, pos, value, ref)
+            pts = (self.reg_branches[lid](h) + inverse_sigmoid(ref)).sigmoid()
+            logits = cls_branches[lid](h.view(cfg.num_vec, cfg.num_pts, d).mean(1))
+            outs.append((logits, pts.view(cfg.num_vec, cfg.num_pts, 2)))
+            ref = pts.detach()
+        return outs

@@ -1,6 +1,8 @@
 """Staged ONNX export: one static-shape opset-17 graph per stage, the bundle manifest (TOML), and
 `reference.safetensors` (one onnxruntime run of every stage on a deterministic frame, fed the
-staged pipeline). CLI: `python -m satmap_ref.export --config nano --out build/nano`."""
+staged pipeline). CLI: `python -m satmap_ref.export --config nano --out build/nano`, with
+`--weights W.safetensors` to export a trained state dict (e.g. a training run's
+`weights.safetensors`) instead of the seeded initial weights."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import numpy as np
 import onnxruntime as ort
 import torch
 from safetensors.numpy import save_file
+from safetensors.torch import load_file as load_torch_file
 
 from .calibration import DEFAULT_CALIBRATION, lidar2img_all, load_calibration
 from .config import SatMapConfig, get_config
@@ -215,17 +218,28 @@ class StagedRunner:
         }
 
 
+def load_weights(model: SatMap, path: Path) -> None:
+    """Load a SatMap state dict saved as safetensors (strict: every key, every shape) into
+    `model`, keeping its mode."""
+    sd = load_torch_file(str(path))
+    model.load_state_dict(sd, strict=True)
+
+
 def sha256_file(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def export_bundle(cfg: SatMapConfig, out_dir: Path, seed: int = 0,
-                  calibration: Path = DEFAULT_CALIBRATION) -> SatMap:
-    """Export the five stages, the manifest and `reference.safetensors` into `out_dir`."""
+                  calibration: Path = DEFAULT_CALIBRATION,
+                  weights: Path | None = None) -> SatMap:
+    """Export the five stages, the manifest and `reference.safetensors` into `out_dir`; the
+    weights are the seeded initialisation, or the state dict at `weights` if given."""
     set_deterministic()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     model = build_model(cfg, seed)
+    if weights is not None:
+        load_weights(model, weights)
     hashes = {}
     for stage in STAGE_NAMES:
         data = export_stage_bytes(model, stage)
@@ -244,9 +258,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--config", required=True, help="test | nano | paper | paper_r50 | paper_r60")
     ap.add_argument("--out", required=True, type=Path, help="bundle directory to write")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--weights", type=Path, default=None,
+                    help="trained SatMap state dict (safetensors); default: seeded init")
     args = ap.parse_args(argv)
     cfg = get_config(args.config)
-    export_bundle(cfg, args.out, args.seed)
+    export_bundle(cfg, args.out, args.seed, weights=args.weights)
     for f in sorted(os.listdir(args.out)):
         print(f"{args.out / f}  {os.path.getsize(args.out / f)} bytes")
 

@@ -1,7 +1,14 @@
-"""Regenerates the committed `test` artefacts bit for bit from fixed seeds: the bundle
+"""Regenerates the committed `test` artefacts bit for bit from committed inputs: the bundle
 (`bundles/test/`: five ONNX stages, manifest, reference.safetensors) and the golden vectors
 (`golden/test/`: lut.safetensors, frame_000/001.safetensors).
-CLI: `python -m satmap_ref.golden` (writes under `models/`), or `--root DIR`."""
+
+The weights are the committed trained camera + satellite model (`weights/test_sat.safetensors`,
+made by `python -m satmap_ref.train`), or the seeded initialisation where that file is absent.
+Frame 0 is a real frame of a held-out synthetic drive (`golden/test/input_frame.safetensors`,
+taken once from a dataset with `--take-input DATA`), so the goldens show the trained network
+making a map; frame 1 is the seeded pattern frame whose heading wraps past 2 pi.
+CLI: `python -m satmap_ref.golden` (writes under `models/`), or `--root DIR`; `--weights W` for
+other weights."""
 
 from __future__ import annotations
 
@@ -9,17 +16,58 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from safetensors.numpy import save_file
+from safetensors.numpy import load_file, save_file
 
 from .calibration import DEFAULT_CALIBRATION, lidar2img_all, load_calibration
 from .config import get_config
 from .export import StagedRunner, export_bundle
-from .frames import decode, synthetic_frame
+from .frames import Frame, decode, synthetic_frame
 from .gkt import build_lut
 
 MODELS_ROOT = Path(__file__).resolve().parents[2]
 GOLDEN_CONFIG = "test"
 N_FRAMES = 2
+DEFAULT_WEIGHTS = MODELS_ROOT / "weights" / "test_sat.safetensors"
+INPUT_FRAME = Path("golden") / GOLDEN_CONFIG / "input_frame.safetensors"
+# The held-out frame the goldens start from: test-split drive 3000, frame 12.
+INPUT_SEED, INPUT_INDEX = 3000, 12
+
+
+def take_input(data: Path, root: Path = MODELS_ROOT) -> Path:
+    """Copy the inputs of the held-out frame (`INPUT_SEED`, `INPUT_INDEX`) of a
+    `satmap-dataset/1` folder into `INPUT_FRAME` (its pose and motion must be recorded)."""
+    from safetensors import safe_open
+
+    src = Path(data) / f"drive_{INPUT_SEED:05d}.safetensors"
+    with safe_open(str(src), framework="np") as f:
+        pose = f.get_slice("pose")[INPUT_INDEX]
+        motion = f.get_slice("motion")[INPUT_INDEX]
+        tensors = {
+            "images": f.get_slice("images")[INPUT_INDEX],
+            "satellite": f.get_slice("satellite")[INPUT_INDEX],
+            "ego_yaw_rad": np.asarray(pose[2:3], dtype=np.float64),
+            "acceleration_mps2": np.asarray(motion[0:3], dtype=np.float64),
+            "rotation_rate_radps": np.asarray(motion[3:6], dtype=np.float64),
+            "velocity_mps": np.asarray(motion[6:9], dtype=np.float64),
+        }
+    out = root / INPUT_FRAME
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_file({k: np.ascontiguousarray(v) for k, v in tensors.items()}, str(out),
+              metadata={"source": f"{src.name} frame {INPUT_INDEX}"})
+    return out
+
+
+def golden_frame(cfg, i: int, root: Path) -> Frame:
+    """Input of golden frame `i`: the committed held-out frame for 0 (when present), else the
+    seeded pattern frame."""
+    path = root / INPUT_FRAME
+    if i == 0 and path.exists():
+        t = load_file(str(path))
+        return Frame(t["images"], t["satellite"], float(t["ego_yaw_rad"][0]),
+                     tuple(float(v) for v in t["acceleration_mps2"]),
+                     tuple(float(v) for v in t["rotation_rate_radps"]),
+                     tuple(float(v) for v in t["velocity_mps"]))
+    return synthetic_frame(cfg, i)
 
 
 def golden_paths(root: Path) -> list[Path]:
@@ -32,17 +80,22 @@ def golden_paths(root: Path) -> list[Path]:
     return files
 
 
-def generate(root: Path = MODELS_ROOT) -> None:
+def generate(root: Path = MODELS_ROOT, weights: Path | None = None) -> None:
+    """Write the bundle and goldens under `root` (inputs and default weights from `MODELS_ROOT`
+    when `root` has none of its own)."""
     cfg = get_config(GOLDEN_CONFIG)
+    if weights is None and DEFAULT_WEIGHTS.exists():
+        weights = DEFAULT_WEIGHTS
+    inputs_root = root if (root / INPUT_FRAME).exists() else MODELS_ROOT
     bundle = root / "bundles" / GOLDEN_CONFIG
     gdir = root / "golden" / GOLDEN_CONFIG
     gdir.mkdir(parents=True, exist_ok=True)
-    export_bundle(cfg, bundle)
+    export_bundle(cfg, bundle, weights=weights)
     lut = build_lut(cfg, lidar2img_all(load_calibration(DEFAULT_CALIBRATION), cfg.image_scale))
     save_file(lut.as_dict(), str(gdir / "lut.safetensors"))
     runner = StagedRunner(cfg, bundle)
     for i in range(N_FRAMES):
-        fr = synthetic_frame(cfg, i)
+        fr = golden_frame(cfg, i, inputs_root)
         out = runner.run_frame(fr, lut)
         out.pop("_records")
         tensors = {
@@ -62,8 +115,14 @@ def generate(root: Path = MODELS_ROOT) -> None:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--root", type=Path, default=MODELS_ROOT)
+    ap.add_argument("--weights", type=Path, default=None,
+                    help=f"SatMap state dict (safetensors); default: {DEFAULT_WEIGHTS}")
+    ap.add_argument("--take-input", type=Path, default=None, metavar="DATA",
+                    help="first copy the held-out input frame from this dataset folder")
     args = ap.parse_args(argv)
-    generate(args.root)
+    if args.take_input is not None:
+        print(take_input(args.take_input, args.root))
+    generate(args.root, args.weights)
     for p in golden_paths(args.root):
         print(args.root / p, (args.root / p).stat().st_size)
 

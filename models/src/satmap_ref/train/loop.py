@@ -1,0 +1,175 @@
+"""The training loop: AdamW, linear warm-up then cosine decay to 0 at the last step, gradient
+clipping, a batch as gradient accumulation over seeded frames, the per-step JSON-lines log,
+checkpoints (every K steps, at the end and at the time limit) and resuming from them."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from tqdm import tqdm
+
+from ..model import SatMap, build_model
+from .checkpoint import CHECKPOINT, WEIGHTS, load_checkpoint, save_checkpoint, save_weights
+from .dataset import Sample, SatMapDataset
+from .forward import MODES, LutTensors, forward_layers, load_lut, set_train_mode
+from .losses import LossWeights, frame_loss, num_positives
+from .sampler import EpochSampler
+from .targets import MapTargets, build_targets
+
+LOG = "log.jsonl"
+
+
+@dataclass
+class TrainArgs:
+    """Options of one run (the CLI's flags)."""
+
+    data: Path
+    mode: str
+    out: Path
+    steps: int
+    batch: int = 4
+    lr: float = 6e-4
+    warmup: int = 200
+    seed: int = 0
+    threads: int = 2
+    time_limit_min: float | None = None
+    ckpt_every: int = 100
+    weight_decay: float = 0.01  # MapTR: AdamW, weight decay 0.01
+    clip_norm: float = 35.0  # MapTR: grad_clip max_norm 35, L2
+    progress: bool = True
+
+
+def lr_factor(step: int, total: int, warmup: int) -> float:
+    """Multiplier of the base LR for update `step` (0-based) of `total`: linear warm-up over
+    `warmup` updates (1/warmup .. 1), then half a cosine that reaches 0 at `total`. A warm-up
+    longer than the run is cut to leave at least the last update to the decay."""
+    w = max(0, min(warmup, total - 1))
+    if step < w:
+        return (step + 1) / w
+    span = max(1, total - w)
+    return 0.5 * (1.0 + math.cos(math.pi * (step - w) / span))
+
+
+def train_step(model: SatMap, lut: LutTensors, batch: list[tuple[Sample, MapTargets]],
+               mode: str) -> dict[str, float]:
+    """Forward and backward over the frames of a batch, gradients accumulated; every loss is
+    normalised by the batch's number of positives, so the result equals one batched MapTR step.
+    Returns the loss parts summed over the batch (`loss` = their total)."""
+    cfg = model.cfg
+    avg = float(max(1, sum(num_positives(t, cfg.num_vec) for _, t in batch)))
+    parts: dict[str, float] = {}
+    for sample, tgt in batch:
+        loss, p = frame_loss(forward_layers(model, lut, sample, mode), tgt, cfg.pc_range_m, avg,
+                             LossWeights())
+        loss.backward()
+        for k, v in p.items():
+            parts[k] = parts.get(k, 0.0) + v
+    parts = {"loss": sum(parts.values()), **parts}
+    parts["num_gt"] = float(sum(t.num_gt for _, t in batch))
+    return parts
+
+
+def _trim_log(path: Path, upto: int) -> None:
+    """Drop log records after the checkpoint's step (a run killed between checkpoints repeats
+    them on resume)."""
+    if not path.exists():
+        return
+    keep = [ln for ln in path.read_text().splitlines()
+            if ln.strip() and json.loads(ln)["step"] <= upto]
+    path.write_text("".join(ln + "\n" for ln in keep))
+
+
+def train(args: TrainArgs) -> dict[str, Any]:
+    """Run (or resume) training until `args.steps` updates or the time limit. Writes
+    `checkpoint.pt`, `log.jsonl` and `weights.safetensors` into `args.out`; returns a summary."""
+    if args.mode not in MODES:
+        raise ValueError(f"mode {args.mode!r}, want one of {MODES}")
+    torch.set_num_threads(args.threads)
+    torch.use_deterministic_algorithms(True)
+    torch.manual_seed(args.seed)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    ds = SatMapDataset(args.data)
+    cfg = ds.cfg
+    frames = ds.frames("train")
+    sampler = EpochSampler(len(frames), args.seed)
+    lut = load_lut(cfg)
+    model = build_model(cfg, args.seed)
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt = torch.optim.AdamW(params, lr=args.lr, weight_decay=args.weight_decay)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: lr_factor(s, args.steps, args.warmup))
+    step, elapsed = 0, 0.0
+    ck = load_checkpoint(out / CHECKPOINT)
+    if ck is not None:
+        if ck["mode"] != args.mode or ck["config"] != cfg.name:
+            raise ValueError(f"{out / CHECKPOINT} is a {ck['config']}/{ck['mode']} run, "
+                             f"not {cfg.name}/{args.mode}")
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["optimizer"])
+        sched.load_state_dict(ck["scheduler"])
+        sampler.load_state_dict(ck["sampler"])
+        torch.set_rng_state(ck["torch_rng"])
+        step, elapsed = int(ck["step"]), float(ck["elapsed_s"])
+        # The schedule follows this invocation's --steps (a run may be extended).
+        for g, base in zip(opt.param_groups, sched.base_lrs):
+            g["lr"] = base * lr_factor(step, args.steps, args.warmup)
+    _trim_log(out / LOG, step)
+    (out / "run.json").write_text(json.dumps(
+        {**{k: str(v) if isinstance(v, Path) else v for k, v in asdict(args).items()},
+         "config": cfg.name, "train_frames": len(frames)}, indent=1) + "\n")
+
+    def checkpoint() -> None:
+        save_checkpoint(out / CHECKPOINT, {
+            "step": step, "elapsed_s": elapsed, "mode": args.mode, "config": cfg.name,
+            "args": {k: str(v) for k, v in asdict(args).items()},
+            "model": model.state_dict(), "optimizer": opt.state_dict(),
+            "scheduler": sched.state_dict(), "sampler": sampler.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+        })
+
+    set_train_mode(model)
+    limit_s = None if args.time_limit_min is None else 60.0 * args.time_limit_min
+    t_run = time.monotonic()
+    last: dict[str, float] = {}
+    bar = tqdm(total=args.steps, initial=step, disable=not args.progress, dynamic_ncols=True,
+               desc=f"train {args.mode}")
+    timed_out = False
+    with (out / LOG).open("a") as log:
+        while step < args.steps:
+            t0 = time.monotonic()
+            batch = []
+            for i in sampler.draw(args.batch):
+                s = ds.load(frames[i])
+                batch.append((s, build_targets(s.vectors, cfg.pc_range_m, cfg.num_pts)))
+            opt.zero_grad(set_to_none=True)
+            last = train_step(model, lut, batch, args.mode)
+            gnorm = torch.nn.utils.clip_grad_norm_(params, args.clip_norm)
+            lr = opt.param_groups[0]["lr"]
+            opt.step()
+            sched.step()
+            step += 1
+            dt = time.monotonic() - t0
+            elapsed += dt
+            rec = {"step": step, **last, "lr": lr, "grad_norm": float(gnorm), "step_s": dt,
+                   "wall_s": elapsed, "time": time.time()}
+            log.write(json.dumps(rec) + "\n")
+            log.flush()
+            bar.update(1)
+            bar.set_postfix(loss=f"{last['loss']:.3f}", lr=f"{lr:.2e}")
+            if step % args.ckpt_every == 0 and step < args.steps:
+                checkpoint()
+            if limit_s is not None and time.monotonic() - t_run >= limit_s and step < args.steps:
+                timed_out = True
+                break
+    bar.close()
+    checkpoint()
+    save_weights(model, out / WEIGHTS)
+    return {"step": step, "steps": args.steps, "finished": step >= args.steps,
+            "timed_out": timed_out, "elapsed_s": elapsed, "last": last}
