@@ -273,46 +273,42 @@ fn check_pose(pose: &EgoPose, limits: &FrameLimits) -> Result<(), StepError> {
     Ok(())
 }
 
+/// The first component of `v` (x, y, z order) whose magnitude exceeds `limit`, with its axis.
+fn first_beyond(v: glam::Vec3, limit: f32) -> Option<(Axis, f32)> {
+    Axis::ALL
+        .into_iter()
+        .zip(v.to_array())
+        .find(|(_, value)| value.abs() > limit)
+}
+
 /// Motion finite, then each component inside its range (CAN-bus order).
 fn check_motion(motion: &EgoMotion, limits: &FrameLimits) -> Result<(), StepError> {
     if !motion.is_finite() {
         return Err(StepError::NonFiniteMotion);
     }
     let limit_mps2 = limits.max_abs_acceleration_mps2;
-    for (axis, value_mps2) in Axis::ALL
-        .into_iter()
-        .zip(motion.acceleration_mps2.to_array())
-    {
-        if value_mps2.abs() > limit_mps2 {
-            return Err(StepError::AccelerationOutOfRange {
-                axis,
-                value_mps2,
-                limit_mps2,
-            });
-        }
+    if let Some((axis, value_mps2)) = first_beyond(motion.acceleration_mps2, limit_mps2) {
+        return Err(StepError::AccelerationOutOfRange {
+            axis,
+            value_mps2,
+            limit_mps2,
+        });
     }
     let limit_radps = limits.max_abs_rotation_rate_radps;
-    for (axis, value_radps) in Axis::ALL
-        .into_iter()
-        .zip(motion.rotation_rate_radps.to_array())
-    {
-        if value_radps.abs() > limit_radps {
-            return Err(StepError::RotationRateOutOfRange {
-                axis,
-                value_radps,
-                limit_radps,
-            });
-        }
+    if let Some((axis, value_radps)) = first_beyond(motion.rotation_rate_radps, limit_radps) {
+        return Err(StepError::RotationRateOutOfRange {
+            axis,
+            value_radps,
+            limit_radps,
+        });
     }
     let limit_mps = limits.max_abs_velocity_mps;
-    for (axis, value_mps) in Axis::ALL.into_iter().zip(motion.velocity_mps.to_array()) {
-        if value_mps.abs() > limit_mps {
-            return Err(StepError::VelocityOutOfRange {
-                axis,
-                value_mps,
-                limit_mps,
-            });
-        }
+    if let Some((axis, value_mps)) = first_beyond(motion.velocity_mps, limit_mps) {
+        return Err(StepError::VelocityOutOfRange {
+            axis,
+            value_mps,
+            limit_mps,
+        });
     }
     Ok(())
 }
