@@ -111,7 +111,7 @@ def conditions(ds: SatMapDataset, split: str) -> dict[str, Callable[[str], bool]
     return {
         "all": lambda t: True,
         "occluded": lambda t: info[t][0] >= OCCLUDED_SHARE,
-        "long range (|y| >= 15 m)": lambda t: True,
+        "long range (far half)": lambda t: True,
         "rain / dusk": lambda t: info[t][1] in ("rain", "dusk"),
         "day": lambda t: info[t][1] == "day",
         "stale imagery": lambda t: info[t][2],
