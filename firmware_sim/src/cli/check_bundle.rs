@@ -36,6 +36,14 @@ pub struct OutputCheck {
 
 /// Run the check; prints one line per stage output and fails if any exceeds the tolerance.
 pub fn run(args: &Args) -> Result<()> {
+    // A NaN tolerance would make every comparison false and so pass every bundle.
+    if !(args.tolerance.is_finite() && args.tolerance >= 0.0) {
+        return Err(crate::cli::drive::BadArgument(format!(
+            "--tolerance must be a finite number >= 0, got {}",
+            args.tolerance
+        ))
+        .into());
+    }
     let mut worst = 0.0f32;
     for dir in &args.bundles {
         let started = std::time::Instant::now();
@@ -55,7 +63,7 @@ pub fn run(args: &Args) -> Result<()> {
                 "  {:<36} {:>9} values  max |tract - onnxruntime| = {:.3e}  ({:.1} ms)",
                 check.name, check.len, check.max_abs_diff, check.run_ms
             );
-            worst = worst.max(check.max_abs_diff);
+            worst = worst_of(worst, check.max_abs_diff);
         }
     }
     println!(
@@ -97,6 +105,15 @@ pub fn u8s<'a>(st: &'a SafeTensors<'_>, name: &str) -> Result<&'a [u8]> {
     Ok(view.data())
 }
 
+/// The larger difference, NaN winning (`f32::max` would drop a NaN and hide a broken stage).
+fn worst_of(m: f32, d: f32) -> f32 {
+    if m.is_nan() || d.is_nan() {
+        f32::NAN
+    } else {
+        m.max(d)
+    }
+}
+
 fn compare(name: &str, got: &[f32], want: &[f32], run_ms: f64) -> Result<OutputCheck> {
     if got.len() != want.len() {
         bail!("{name}: {} values, reference has {}", got.len(), want.len());
@@ -105,7 +122,7 @@ fn compare(name: &str, got: &[f32], want: &[f32], run_ms: f64) -> Result<OutputC
         .iter()
         .zip(want)
         .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, |m, d| if d.is_nan() || d > m { d } else { m });
+        .fold(0.0f32, worst_of);
     Ok(OutputCheck {
         name: name.to_owned(),
         len: got.len(),
@@ -161,4 +178,34 @@ pub fn check_all(engine: &mut TractEngine, st: &SafeTensors<'_>) -> Result<Vec<O
     checks.push(compare("map_decoder.class_logits", &l, &want_l, ms)?);
     checks.push(compare("map_decoder.points", &p, &want_p, ms)?);
     Ok(checks)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_nan_difference_is_the_worst() {
+        assert!(worst_of(0.0, f32::NAN).is_nan());
+        assert!(worst_of(f32::NAN, 1e-6).is_nan());
+        assert_eq!(worst_of(1e-6, 2e-6), 2e-6);
+        let c = compare("x", &[1.0, f32::NAN, 2.0], &[1.0, 0.0, 2.5], 0.0).unwrap();
+        assert!(c.max_abs_diff.is_nan());
+    }
+
+    #[test]
+    fn a_tolerance_that_cannot_fail_is_refused_before_any_work() {
+        for tolerance in [f32::NAN, f32::INFINITY, -1e-4] {
+            let args = Args {
+                bundles: vec![PathBuf::from("/nonexistent/bundle")],
+                tolerance,
+            };
+            let e = run(&args).unwrap_err();
+            assert!(
+                e.downcast_ref::<crate::cli::drive::BadArgument>().is_some(),
+                "{tolerance}: {e:#}"
+            );
+            assert!(e.to_string().contains("--tolerance"), "{e}");
+        }
+    }
 }
