@@ -33,7 +33,7 @@ use satmap_runtime::calibration::Calibration;
 use satmap_runtime::capacity::{check_regions, layout};
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::error::{InitError, StepError};
-use satmap_runtime::frame::{CameraImage, Frame};
+use satmap_runtime::frame::{CameraImage, Frame, FrameLimits};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::map_frame::MapFrame;
 use satmap_runtime::pose::{EgoMotion, EgoPose};
@@ -362,6 +362,11 @@ fn to_vectors(map: &MapFrame) -> Vec<MapVector> {
         .collect()
 }
 
+/// Slowest virtual clock a replay accepts, Hz.
+pub const MIN_RATE_HZ: f64 = 1e-3;
+/// Fastest virtual clock a replay accepts, Hz.
+pub const MAX_RATE_HZ: f64 = 1e4;
+
 /// Run a replay. `alloc` is the global allocator when the process runs in the arena (already
 /// initialised by the caller); `None` runs without arena figures.
 ///
@@ -371,10 +376,13 @@ pub fn replay(
     cfg: &ReplayConfig,
     alloc: Option<&'static ArenaAllocator>,
 ) -> Result<Replay, HarnessError> {
-    if !(cfg.rate_hz > 0.0 && cfg.rate_hz.is_finite()) || cfg.frames == 0 {
-        return Err(HarnessError::Settings(
-            "rate must be positive and frames at least 1".into(),
-        ));
+    // 1 mHz .. 10 kHz keeps every virtual timestamp (start + frames * period) far from u64
+    // overflow for any frame count the harness can hold.
+    if !(cfg.rate_hz >= MIN_RATE_HZ && cfg.rate_hz <= MAX_RATE_HZ) || cfg.frames == 0 {
+        return Err(HarnessError::Settings(format!(
+            "rate must be in [{MIN_RATE_HZ}, {MAX_RATE_HZ}] Hz (got {}) and frames at least 1",
+            cfg.rate_hz
+        )));
     }
     let period_us = (1e6 / cfg.rate_hz).round() as u64;
     // Host side: the bundle manifest, the scenario, the route pack (flash on the vehicle).
@@ -415,7 +423,14 @@ pub fn replay(
         PackSource::from_bytes(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?,
         frames,
     );
-    let mut satmap = SatMap::new(engine, source.calibration(), satellite)?;
+    // The virtual clock sets the timestamps: a slow replay must not look like an outage.
+    let limits = FrameLimits {
+        max_timestamp_gap_us: FrameLimits::DEFAULT
+            .max_timestamp_gap_us
+            .max(period_us.saturating_mul(2)),
+        ..FrameLimits::DEFAULT
+    };
+    let mut satmap = SatMap::with_limits(engine, source.calibration(), satellite, limits)?;
     let after_init = stats_of(alloc);
 
     // Host-side buffers, reserved before the loop.
