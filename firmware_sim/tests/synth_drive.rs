@@ -208,5 +208,11 @@ fn scenario_folder_round_trips_frames_exactly() {
     // The regenerated drive is the same drive.
     let again = scenario.regenerate().unwrap().unwrap();
     assert_eq!(again.frame(2), drive.frame(2));
+    // A manifest edited to zero frames is refused, not replayed as an empty success.
+    let path = dir.join("scenario.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, text.replace("num_frames = 3", "num_frames = 0")).unwrap();
+    let e = Scenario::open(&dir).unwrap_err().to_string();
+    assert!(e.contains("num_frames is 0"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -352,6 +352,13 @@ impl Scenario {
                 manifest.format
             )));
         }
+        // An empty scenario would replay nothing and report success.
+        if manifest.num_frames == 0 {
+            return Err(ScenarioError::Invalid(format!(
+                "{}: num_frames is 0: a scenario has at least one frame",
+                path.display()
+            )));
+        }
         let calibration = from_toml_file(&dir.join(&manifest.calibration_file))?;
         Ok(Self {
             dir: dir.to_owned(),
