@@ -70,6 +70,7 @@ pub struct Args {
 /// # Errors
 /// Bad settings, an unreadable calibration, or a file that cannot be written.
 pub fn run(args: &Args) -> Result<()> {
+    check_placement(args)?;
     let config = DriveConfig {
         image_width_px: args.image_width,
         image_height_px: args.image_height,
@@ -106,6 +107,39 @@ pub fn run(args: &Args) -> Result<()> {
         drive.lighting_preset(),
         args.out.display()
     );
+    Ok(())
+}
+
+/// Largest |latitude| of the anchor, degrees: Web Mercator tiles shrink by cos(latitude), so
+/// near the poles a world needs thousands of times more tiles (at 90 deg, infinitely many).
+pub const MAX_ANCHOR_LAT_DEG: f64 = 80.0;
+/// Tile zooms accepted: 15 (4.8 m/px at the equator) to 21 (0.075 m/px); beyond 21 one world
+/// is tens of thousands of tiles.
+pub const TILE_ZOOMS: std::ops::RangeInclusive<u8> = 15..=21;
+
+/// Refuse an anchor or zoom whose tile set would not be finite or reasonable, before any work.
+fn check_placement(args: &Args) -> Result<()> {
+    let bad = |m: String| Err(crate::cli::drive::BadArgument(m).into());
+    if !(-MAX_ANCHOR_LAT_DEG..=MAX_ANCHOR_LAT_DEG).contains(&args.anchor_lat) {
+        return bad(format!(
+            "--anchor-lat {} must be within +-{MAX_ANCHOR_LAT_DEG} degrees",
+            args.anchor_lat
+        ));
+    }
+    if !(-180.0..=180.0).contains(&args.anchor_lon) {
+        return bad(format!(
+            "--anchor-lon {} must be within +-180 degrees",
+            args.anchor_lon
+        ));
+    }
+    if !TILE_ZOOMS.contains(&args.zoom) {
+        return bad(format!(
+            "--zoom {} must be in {}..={}",
+            args.zoom,
+            TILE_ZOOMS.start(),
+            TILE_ZOOMS.end()
+        ));
+    }
     Ok(())
 }
 
@@ -153,4 +187,41 @@ fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
         bar.set_style(style);
     }
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn args(extra: &[&str]) -> Args {
+        let mut argv = vec!["synth-drive", "--out", "/nonexistent/never-written"];
+        argv.extend_from_slice(extra);
+        Cli::parse_from(argv).args
+    }
+
+    #[test]
+    fn poles_bad_longitudes_and_huge_zooms_are_refused_before_any_work() {
+        for extra in [
+            &["--anchor-lat", "90"][..],
+            &["--anchor-lat", "-85"],
+            &["--anchor-lat", "NaN"],
+            &["--anchor-lon", "181"],
+            &["--zoom", "30"],
+            &["--zoom", "3"],
+        ] {
+            let e = run(&args(extra)).unwrap_err();
+            assert!(
+                e.downcast_ref::<crate::cli::drive::BadArgument>().is_some(),
+                "{extra:?}: {e:#}"
+            );
+        }
+        assert!(check_placement(&args(&["--anchor-lat", "69.6", "--zoom", "21"])).is_ok());
+    }
 }
