@@ -307,8 +307,9 @@ impl MemoryLayout {
         self.region
             .values()
             .filter(|r| r.owner == Owner::Runtime)
-            .map(|r| r.bytes)
-            .sum()
+            // Saturating: sizes from the file may sum past usize, and the arena check then
+            // reports the layout instead of the parser overflowing (build.rs runs it too).
+            .fold(0usize, |acc, r| acc.saturating_add(r.bytes))
     }
 
     /// Rust source with one `pub const <NAME>_BYTES: usize` and `<NAME>_SHAPE` per region, the
@@ -406,7 +407,8 @@ impl MemoryLayout {
             for (name, r) in self.region.iter().filter(|(_, r)| r.owner == owner) {
                 let off = if owner == Owner::Runtime {
                     let o = format!("0x{offset:08x}");
-                    offset += r.bytes.next_multiple_of(64);
+                    offset = offset
+                        .saturating_add(r.bytes.checked_next_multiple_of(64).unwrap_or(usize::MAX));
                     o
                 } else {
                     "-".into()
@@ -425,7 +427,7 @@ impl MemoryLayout {
             }
         }
         let regions = self.runtime_bytes();
-        let used = regions + self.arena.graph_engine_bytes;
+        let used = regions.saturating_add(self.arena.graph_engine_bytes);
         let _ = writeln!(s, "{:-<100}", "");
         let _ = writeln!(
             s,

@@ -107,3 +107,27 @@ fn each_bad_fixture_fails_with_its_error() {
         );
     }
 }
+
+#[test]
+fn region_sizes_that_sum_past_usize_are_an_arena_error_not_an_overflow() {
+    // Four runtime regions of 2^62 bytes each (f32 x 2^60, consistent with their shapes):
+    // their sum is 2^64, one past usize::MAX on a 64-bit host.
+    let mut text = read("memory_layout.toml");
+    for shape in [
+        "shape = [18]\ndtype = \"f32\"\nbytes = 72",
+        "shape = [6, 60, 256]\ndtype = \"f32\"\nbytes = 368640",
+        "shape = [3200, 4, 15]\ndtype = \"f32\"\nbytes = 768000",
+        "shape = [100, 20, 2]\ndtype = \"f32\"\nbytes = 16000",
+    ] {
+        assert!(text.contains(shape), "fixture drifted: {shape}");
+        text = text.replace(
+            shape,
+            "shape = [1152921504606846976]\ndtype = \"f32\"\nbytes = 4611686018427387904",
+        );
+    }
+    let err = MemoryLayout::parse(&text).unwrap_err();
+    assert!(
+        matches!(err, LayoutError::ArenaTooSmall { regions, .. } if regions == usize::MAX),
+        "{err}"
+    );
+}
