@@ -13,7 +13,7 @@ use super::camera_render::CameraRig;
 use super::ground_raster::{GroundRaster, RasterError, WorldRasters, paint_world_with_imagery};
 use super::imagery::{ImageryConfig, ImageryErrors, draw_errors};
 use super::lighting::{Lighting, LightingPreset};
-use super::patch_gt::{Patch, ground_truth};
+use super::patch_gt::{Patch, ground_truth, route_to_ego};
 use super::world::{OccluderKind, World, WorldConfig};
 use crate::eval::MapVector;
 
@@ -231,10 +231,8 @@ impl SyntheticDrive {
     #[must_use]
     pub fn occluded_share(&self, pose: &EgoPose, ground_truth: &[MapVector]) -> f64 {
         let (sin, cos) = pose.yaw_rad.sin_cos();
-        let to_ego = |p: DVec2| {
-            let d = p - pose.position_m;
-            DVec2::new(d.x * sin - d.y * cos, d.x * cos + d.y * sin)
-        };
+        let (fwd, right) = (DVec2::new(cos, sin), DVec2::new(sin, -cos));
+        let to_ego = |p: DVec2| route_to_ego(p, pose.position_m, fwd, right);
         let discs: Vec<(DVec2, f64)> = self
             .world
             .occluders

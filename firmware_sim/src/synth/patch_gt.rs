@@ -37,6 +37,14 @@ impl Patch {
 /// Pieces shorter than this are dropped (grazing a patch corner), metres.
 const MIN_PIECE_LENGTH_M: f64 = 0.05;
 
+/// Ego-frame position of route point `p` seen from `position_m`, heading `fwd`, right `right`
+/// (the inverse of `EgoPose::ego_to_route`).
+#[must_use]
+pub fn route_to_ego(p: DVec2, position_m: DVec2, fwd: DVec2, right: DVec2) -> DVec2 {
+    let r = p - position_m;
+    DVec2::new(r.dot(right), r.dot(fwd))
+}
+
 /// Ground truth of `world` seen from `pose`, cut to `patch`.
 #[must_use]
 pub fn ground_truth(world: &World, pose: &EgoPose, patch: &Patch) -> Vec<MapVector> {
@@ -48,10 +56,7 @@ pub fn ground_truth(world: &World, pose: &EgoPose, patch: &Patch) -> Vec<MapVect
         .abs()
         .max(patch.x_max_m.abs())
         .hypot(patch.y_min_m.abs().max(patch.y_max_m.abs()));
-    let to_ego = |p: DVec2| {
-        let r = p - pose.position_m;
-        DVec2::new(r.dot(right), r.dot(fwd))
-    };
+    let to_ego = |p: DVec2| route_to_ego(p, pose.position_m, fwd, right);
     let near = |pts: &[DVec2]| {
         pts.iter()
             .any(|p| (*p - pose.position_m).length() < reach + 50.0)
