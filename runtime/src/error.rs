@@ -7,7 +7,6 @@ use crate::calibration::CalibrationFault;
 use crate::engine::{EngineError, Stage};
 use crate::frame::Axis;
 use crate::gkt::KernelError;
-use crate::model_dims::DimsError;
 
 /// Why the runtime could not be created or recalibrated.
 ///
@@ -346,3 +345,128 @@ impl From<KernelError> for StepError {
         Self::Kernel(e)
     }
 }
+
+/// Why a [`ModelDims`] cannot run on this runtime.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum DimsError {
+    /// A size that must be positive is zero.
+    Zero {
+        /// Field name.
+        field: &'static str,
+    },
+    /// A number is NaN or infinite.
+    NonFinite {
+        /// Field name.
+        field: &'static str,
+    },
+    /// `embed_dims` does not split into the GKT heads.
+    EmbedDimsNotDivisibleByHeads {
+        /// The configured channels.
+        embed_dims: usize,
+        /// Heads the channels must split into.
+        heads: usize,
+    },
+    /// More BEV queries than the look-up table can address.
+    TooManyQueries {
+        /// `bev_h * bev_w`.
+        queries: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// A feature map larger than the look-up table can address.
+    TooManyFeatures {
+        /// `feat_h * feat_w`.
+        features: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// The GKT kernel is larger than the weights buffer allows.
+    KernelTooLarge {
+        /// `kernel_h * kernel_w`.
+        points: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// Points per instance differ from the fixed polyline length.
+    PointsMismatch {
+        /// Configured points.
+        num_pts: usize,
+        /// Fixed capacity.
+        expected: usize,
+    },
+    /// `top_k` is larger than the output capacity or than `num_vec * classes`.
+    TopKTooLarge {
+        /// Configured top-k.
+        top_k: usize,
+        /// Largest allowed value.
+        max: usize,
+    },
+    /// The padded image is smaller than the image.
+    PaddingSmallerThanImage {
+        /// True for the height, false for the width.
+        height: bool,
+    },
+    /// `pc_range_m` has `min >= max` on an axis (0 = x, 1 = y, 2 = z).
+    EmptyRange {
+        /// Axis index.
+        axis: u8,
+    },
+    /// A positive quantity (scale, ground sampling distance) is not positive.
+    NotPositive {
+        /// Field name.
+        field: &'static str,
+    },
+}
+
+impl fmt::Display for DimsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Zero { field } => write!(f, "model dimension `{field}` is zero"),
+            Self::NonFinite { field } => write!(f, "model field `{field}` is not finite"),
+            Self::EmbedDimsNotDivisibleByHeads { embed_dims, heads } => {
+                write!(
+                    f,
+                    "embed_dims {embed_dims} is not divisible by {heads} GKT heads"
+                )
+            }
+            Self::TooManyQueries { queries, max } => {
+                write!(
+                    f,
+                    "{queries} BEV queries exceed the look-up table capacity {max}"
+                )
+            }
+            Self::TooManyFeatures { features, max } => {
+                write!(
+                    f,
+                    "{features} feature cells exceed the look-up table capacity {max}"
+                )
+            }
+            Self::KernelTooLarge { points, max } => {
+                write!(
+                    f,
+                    "GKT kernel of {points} points exceeds the capacity {max}"
+                )
+            }
+            Self::PointsMismatch { num_pts, expected } => {
+                write!(
+                    f,
+                    "num_pts {num_pts} differs from the fixed polyline length {expected}"
+                )
+            }
+            Self::TopKTooLarge { top_k, max } => write!(f, "top_k {top_k} exceeds {max}"),
+            Self::PaddingSmallerThanImage { height: true } => {
+                write!(f, "pad_h is smaller than image_h")
+            }
+            Self::PaddingSmallerThanImage { height: false } => {
+                write!(f, "pad_w is smaller than image_w")
+            }
+            Self::EmptyRange { axis } => {
+                write!(f, "pc_range_m axis {axis} has min >= max")
+            }
+            Self::NotPositive { field } => write!(f, "model field `{field}` must be positive"),
+        }
+    }
+}
+
+impl core::error::Error for DimsError {}

@@ -25,6 +25,7 @@ pub mod gkt;
 pub mod map_frame;
 pub mod model_dims;
 pub mod pose;
+pub mod regions;
 pub mod route_pack;
 pub mod satellite;
 pub mod step;

@@ -5,13 +5,12 @@
 //! y forward, z up). The BEV grid has `bev_h` rows along y (row 0 at the rear) and `bev_w` columns
 //! along x (column 0 at the left).
 
-use core::fmt;
-
 use crate::calibration::CAMERA_NAMES;
 use crate::capacity::{
     MAX_CAMERAS, MAX_FEATURES, MAX_KERNEL_POINTS, MAX_QUERIES, MAX_TOP_K, NUM_CLASSES, NUM_HEADS,
     NUM_POINTS,
 };
+use crate::error::DimsError;
 use crate::satellite::CropSpec;
 
 /// Class names in head order, as the manifest spells them.
@@ -20,7 +19,7 @@ pub const CLASS_NAMES: [&str; NUM_CLASSES] = ["divider", "ped_crossing", "bounda
 /// Shapes and geometry of one exported model configuration (`test`, `nano`, `paper`).
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Deserialize))]
-#[cfg_attr(feature = "std", serde(try_from = "manifest_table::ModelTable"))]
+#[cfg_attr(feature = "std", serde(try_from = "crate::bundle::ModelTable"))]
 pub struct ModelDims {
     /// Channels of every feature and BEV tensor (`D`).
     pub embed_dims: usize,
@@ -63,131 +62,6 @@ pub struct ModelDims {
     /// Satellite crop ground sampling distance, metres per pixel.
     pub sat_gsd_m: f64,
 }
-
-/// Why a [`ModelDims`] cannot run on this runtime.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
-pub enum DimsError {
-    /// A size that must be positive is zero.
-    Zero {
-        /// Field name.
-        field: &'static str,
-    },
-    /// A number is NaN or infinite.
-    NonFinite {
-        /// Field name.
-        field: &'static str,
-    },
-    /// `embed_dims` does not split into the GKT heads.
-    EmbedDimsNotDivisibleByHeads {
-        /// The configured channels.
-        embed_dims: usize,
-        /// Heads the channels must split into.
-        heads: usize,
-    },
-    /// More BEV queries than the look-up table can address.
-    TooManyQueries {
-        /// `bev_h * bev_w`.
-        queries: usize,
-        /// Capacity.
-        max: usize,
-    },
-    /// A feature map larger than the look-up table can address.
-    TooManyFeatures {
-        /// `feat_h * feat_w`.
-        features: usize,
-        /// Capacity.
-        max: usize,
-    },
-    /// The GKT kernel is larger than the weights buffer allows.
-    KernelTooLarge {
-        /// `kernel_h * kernel_w`.
-        points: usize,
-        /// Capacity.
-        max: usize,
-    },
-    /// Points per instance differ from the fixed polyline length.
-    PointsMismatch {
-        /// Configured points.
-        num_pts: usize,
-        /// Fixed capacity.
-        expected: usize,
-    },
-    /// `top_k` is larger than the output capacity or than `num_vec * classes`.
-    TopKTooLarge {
-        /// Configured top-k.
-        top_k: usize,
-        /// Largest allowed value.
-        max: usize,
-    },
-    /// The padded image is smaller than the image.
-    PaddingSmallerThanImage {
-        /// True for the height, false for the width.
-        height: bool,
-    },
-    /// `pc_range_m` has `min >= max` on an axis (0 = x, 1 = y, 2 = z).
-    EmptyRange {
-        /// Axis index.
-        axis: u8,
-    },
-    /// A positive quantity (scale, ground sampling distance) is not positive.
-    NotPositive {
-        /// Field name.
-        field: &'static str,
-    },
-}
-
-impl fmt::Display for DimsError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match *self {
-            Self::Zero { field } => write!(f, "model dimension `{field}` is zero"),
-            Self::NonFinite { field } => write!(f, "model field `{field}` is not finite"),
-            Self::EmbedDimsNotDivisibleByHeads { embed_dims, heads } => {
-                write!(
-                    f,
-                    "embed_dims {embed_dims} is not divisible by {heads} GKT heads"
-                )
-            }
-            Self::TooManyQueries { queries, max } => {
-                write!(
-                    f,
-                    "{queries} BEV queries exceed the look-up table capacity {max}"
-                )
-            }
-            Self::TooManyFeatures { features, max } => {
-                write!(
-                    f,
-                    "{features} feature cells exceed the look-up table capacity {max}"
-                )
-            }
-            Self::KernelTooLarge { points, max } => {
-                write!(
-                    f,
-                    "GKT kernel of {points} points exceeds the capacity {max}"
-                )
-            }
-            Self::PointsMismatch { num_pts, expected } => {
-                write!(
-                    f,
-                    "num_pts {num_pts} differs from the fixed polyline length {expected}"
-                )
-            }
-            Self::TopKTooLarge { top_k, max } => write!(f, "top_k {top_k} exceeds {max}"),
-            Self::PaddingSmallerThanImage { height: true } => {
-                write!(f, "pad_h is smaller than image_h")
-            }
-            Self::PaddingSmallerThanImage { height: false } => {
-                write!(f, "pad_w is smaller than image_w")
-            }
-            Self::EmptyRange { axis } => {
-                write!(f, "pc_range_m axis {axis} has min >= max")
-            }
-            Self::NotPositive { field } => write!(f, "model field `{field}` must be positive"),
-        }
-    }
-}
-
-impl core::error::Error for DimsError {}
 
 impl ModelDims {
     /// BEV queries, `bev_h * bev_w` (`Q`).
@@ -439,86 +313,6 @@ impl ModelDims {
 
 /// Camera names a manifest must list, in model order (re-exported for manifest checks).
 pub const MANIFEST_CAMERAS: [&str; MAX_CAMERAS] = CAMERA_NAMES;
-
-#[cfg(feature = "std")]
-mod manifest_table {
-    //! The `[model]` table exactly as the manifest spells it; converted into [`ModelDims`].
-    use super::{CLASS_NAMES, MANIFEST_CAMERAS, ModelDims, NUM_HEADS};
-
-    /// Raw `[model]` table (see `ARCHITECTURE.md`, "Bundle").
-    #[derive(serde::Deserialize)]
-    pub(super) struct ModelTable {
-        #[allow(
-            dead_code,
-            reason = "the config name is informative; shapes carry the meaning"
-        )]
-        config: Option<String>,
-        embed_dims: usize,
-        bev_h: usize,
-        bev_w: usize,
-        pc_range_m: [f32; 6],
-        classes: Vec<String>,
-        num_vec: usize,
-        num_pts: usize,
-        top_k: usize,
-        cameras: Vec<String>,
-        image_scale: f64,
-        image_h: usize,
-        image_w: usize,
-        pad_h: usize,
-        pad_w: usize,
-        feat_h: usize,
-        feat_w: usize,
-        gkt_heights_m: [f32; NUM_HEADS],
-        gkt_kernel: [usize; 2],
-        sat_h: usize,
-        sat_w: usize,
-        sat_gsd_m: f64,
-    }
-
-    impl TryFrom<ModelTable> for ModelDims {
-        type Error = String;
-
-        fn try_from(t: ModelTable) -> Result<Self, Self::Error> {
-            if t.classes.iter().map(String::as_str).ne(CLASS_NAMES) {
-                return Err(format!(
-                    "classes {:?} differ from {CLASS_NAMES:?}",
-                    t.classes
-                ));
-            }
-            if t.cameras.iter().map(String::as_str).ne(MANIFEST_CAMERAS) {
-                return Err(format!(
-                    "cameras {:?} differ from {MANIFEST_CAMERAS:?}",
-                    t.cameras
-                ));
-            }
-            let dims = ModelDims {
-                embed_dims: t.embed_dims,
-                bev_h: t.bev_h,
-                bev_w: t.bev_w,
-                pc_range_m: t.pc_range_m,
-                num_vec: t.num_vec,
-                num_pts: t.num_pts,
-                top_k: t.top_k,
-                image_h: t.image_h,
-                image_w: t.image_w,
-                pad_h: t.pad_h,
-                pad_w: t.pad_w,
-                image_scale: t.image_scale,
-                feat_h: t.feat_h,
-                feat_w: t.feat_w,
-                gkt_heights_m: t.gkt_heights_m,
-                kernel_h: t.gkt_kernel[0],
-                kernel_w: t.gkt_kernel[1],
-                sat_h: t.sat_h,
-                sat_w: t.sat_w,
-                sat_gsd_m: t.sat_gsd_m,
-            };
-            dims.validate().map_err(|e| e.to_string())?;
-            Ok(dims)
-        }
-    }
-}
 
 #[cfg(test)]
 mod tests {

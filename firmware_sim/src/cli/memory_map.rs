@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use satmap_layout::MemoryLayout;
 use satmap_runtime::bundle::Bundle;
-use satmap_runtime::capacity::check_regions;
+use satmap_runtime::regions::check_regions;
 
 /// The layout this binary was built with.
 pub const BUILT_IN_LAYOUT: &str = include_str!("../../../memory_layout.toml");

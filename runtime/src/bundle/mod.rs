@@ -6,8 +6,10 @@
 //! bundle that does not fit fails here with an error naming the stage and tensor, never later.
 
 mod manifest;
+mod model_table;
 
 pub use manifest::{DType, Manifest, StageEntry, TensorSpec};
+pub use model_table::ModelTable;
 
 use std::path::{Path, PathBuf};
 

@@ -67,7 +67,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         limits.validate()?;
         let dims = engine.dims().clone();
         dims.validate()?;
-        crate::capacity::check_regions(&dims)?;
+        crate::regions::check_regions(&dims)?;
         let lut = Lut::new(&dims, calibration)?;
         Ok(Self {
             buffers: StepBuffers::new(&dims)?,
