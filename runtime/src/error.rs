@@ -417,6 +417,19 @@ pub enum DimsError {
         /// Field name.
         field: &'static str,
     },
+    /// A derived buffer length in bytes does not fit `usize`.
+    SizeOverflow,
+    /// A GKT reference height lies outside the z range of `pc_range_m`.
+    HeightOutsideRange {
+        /// The head whose height is outside.
+        head: usize,
+    },
+    /// The satellite crop does not cover the BEV range (`sat_w * sat_gsd_m` against the x
+    /// extent, `sat_h * sat_gsd_m` against the y extent).
+    SatelliteExtent {
+        /// True for the y extent (`sat_h`), false for x (`sat_w`).
+        along_y: bool,
+    },
 }
 
 impl fmt::Display for DimsError {
@@ -465,6 +478,19 @@ impl fmt::Display for DimsError {
                 write!(f, "pc_range_m axis {axis} has min >= max")
             }
             Self::NotPositive { field } => write!(f, "model field `{field}` must be positive"),
+            Self::SizeOverflow => write!(f, "model dimensions overflow a buffer length"),
+            Self::HeightOutsideRange { head } => write!(
+                f,
+                "gkt_heights_m[{head}] lies outside the z range of pc_range_m"
+            ),
+            Self::SatelliteExtent { along_y: true } => write!(
+                f,
+                "sat_h * sat_gsd_m differs from the y extent of pc_range_m"
+            ),
+            Self::SatelliteExtent { along_y: false } => write!(
+                f,
+                "sat_w * sat_gsd_m differs from the x extent of pc_range_m"
+            ),
         }
     }
 }

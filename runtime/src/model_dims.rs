@@ -200,6 +200,28 @@ impl ModelDims {
                 return Err(DimsError::EmptyRange { axis });
             }
         }
+        let (z_min_m, z_max_m) = (self.pc_range_m[2], self.pc_range_m[5]);
+        if let Some(head) = self
+            .gkt_heights_m
+            .iter()
+            .position(|h| !(z_min_m..=z_max_m).contains(h))
+        {
+            return Err(DimsError::HeightOutsideRange { head });
+        }
+        // The satellite crop is the BEV range sampled at `sat_gsd_m`, its pixel counts rounded
+        // (as the exporter does): a crop covering another extent would place satellite features
+        // beside the camera features of other cells. Half a pixel, plus a millimetre for the
+        // f32 range, is the rounding.
+        let extents = [
+            (false, self.sat_w, self.pc_range_m[3] - self.pc_range_m[0]),
+            (true, self.sat_h, self.pc_range_m[4] - self.pc_range_m[1]),
+        ];
+        for (along_y, px, range_m) in extents {
+            let covered_m = px as f64 * self.sat_gsd_m;
+            if (covered_m - f64::from(range_m)).abs() > 0.5 * self.sat_gsd_m + 1e-3 {
+                return Err(DimsError::SatelliteExtent { along_y });
+            }
+        }
         if !self.embed_dims.is_multiple_of(NUM_HEADS) {
             return Err(DimsError::EmbedDimsNotDivisibleByHeads {
                 embed_dims: self.embed_dims,
@@ -246,23 +268,29 @@ impl ModelDims {
         if self.pad_w < self.image_w {
             return Err(DimsError::PaddingSmallerThanImage { height: false });
         }
-        // Large but valid sizes must not overflow the derived buffer lengths.
+        // Sizes that pass every bound above may still overflow a derived buffer length in bytes
+        // (`embed_dims = 2^62`): refuse them here so no accessor below can overflow.
+        let f32_bytes = |n: Option<usize>| n.and_then(|v| v.checked_mul(4));
         let lens = [
-            self.value_len().checked_mul(MAX_CAMERAS),
-            queries.checked_mul(self.embed_dims),
+            f32_bytes(
+                features
+                    .checked_mul(self.embed_dims)
+                    .and_then(|v| v.checked_mul(MAX_CAMERAS)),
+            ),
+            f32_bytes(queries.checked_mul(self.embed_dims)),
             self.image_h
                 .checked_mul(self.image_w)
+                .and_then(|v| v.checked_mul(3 * MAX_CAMERAS)),
+            self.pad_h
+                .checked_mul(self.pad_w)
                 .and_then(|v| v.checked_mul(3)),
             self.sat_h
                 .checked_mul(self.sat_w)
                 .and_then(|v| v.checked_mul(3)),
-            self.num_vec.checked_mul(NUM_POINTS * 2),
+            f32_bytes(self.num_vec.checked_mul(NUM_POINTS * 2)),
         ];
         if lens.iter().any(Option::is_none) {
-            return Err(DimsError::TooManyFeatures {
-                features,
-                max: MAX_FEATURES,
-            });
+            return Err(DimsError::SizeOverflow);
         }
         Ok(())
     }
@@ -355,6 +383,50 @@ mod tests {
             d.validate(),
             Err(DimsError::PointsMismatch { .. })
         ));
+    }
+
+    #[test]
+    fn validate_refuses_numbers_that_place_the_map_elsewhere() {
+        // Heights must lie in [zmin, zmax] = [-2, 2].
+        let mut d = ModelDims::test_config();
+        d.gkt_heights_m[3] = 2.5;
+        assert_eq!(d.validate(), Err(DimsError::HeightOutsideRange { head: 3 }));
+        // The bit flip the adversarial test found: pc_range x min -15 -> -14 leaves the 100 px
+        // x 0.3 m crop 1 m wider than the range.
+        let mut d = ModelDims::test_config();
+        d.pc_range_m[0] = -14.0;
+        assert_eq!(
+            d.validate(),
+            Err(DimsError::SatelliteExtent { along_y: false })
+        );
+        // 100 px x 0.31 m = 31 m against 30 m: more than half a pixel off.
+        let mut d = ModelDims::test_config();
+        d.sat_gsd_m = 0.31;
+        assert_eq!(
+            d.validate(),
+            Err(DimsError::SatelliteExtent { along_y: false })
+        );
+        // paper_r50: 100 m at 0.15 m rounds to 667 px (100.05 m), which is the exporter's crop.
+        let mut d = ModelDims::test_config();
+        d.pc_range_m = [-25.0, -50.0, -2.0, 25.0, 50.0, 2.0];
+        (d.sat_h, d.sat_w, d.sat_gsd_m) = (667, 333, 0.15);
+        assert_eq!(d.validate(), Ok(()));
+        let mut d = ModelDims::test_config();
+        d.sat_h = 201;
+        assert_eq!(
+            d.validate(),
+            Err(DimsError::SatelliteExtent { along_y: true })
+        );
+    }
+
+    #[test]
+    fn validate_refuses_sizes_that_overflow_instead_of_panicking() {
+        let mut d = ModelDims::test_config();
+        d.embed_dims = 1 << 62;
+        assert_eq!(d.validate(), Err(DimsError::SizeOverflow));
+        let mut d = ModelDims::test_config();
+        d.pad_w = usize::MAX;
+        assert_eq!(d.validate(), Err(DimsError::SizeOverflow));
     }
 
     #[test]

@@ -245,7 +245,10 @@ def export_bundle(cfg: SatMapConfig, out_dir: Path, seed: int = 0,
         data = export_stage_bytes(model, stage)
         (out_dir / f"{stage}.onnx").write_bytes(data)
         hashes[stage] = hashlib.sha256(data).hexdigest()
-    (out_dir / "manifest.toml").write_text(manifest_text(cfg, hashes))
+    manifest = manifest_text(cfg, hashes).encode()
+    (out_dir / "manifest.toml").write_bytes(manifest)
+    # The bundle digest: the manifest names every stage hash, so this covers the whole bundle.
+    (out_dir / "manifest.sha256").write_text(hashlib.sha256(manifest).hexdigest() + "\n")
     lut = build_lut(cfg, lidar2img_all(load_calibration(calibration), cfg.image_scale))
     staged = StagedRunner(cfg, out_dir).run_frame(synthetic_frame(cfg, 0), lut)
     save_file({k: np.ascontiguousarray(v) for k, v in staged["_records"].items()},

@@ -75,7 +75,8 @@ def golden_paths(root: Path) -> list[Path]:
     b = Path("bundles") / GOLDEN_CONFIG
     g = Path("golden") / GOLDEN_CONFIG
     stages = ["image_encoder", "bev_query", "bev_encoder", "satellite_encoder", "map_decoder"]
-    files = [b / f"{s}.onnx" for s in stages] + [b / "manifest.toml", b / "reference.safetensors"]
+    files = [b / f"{s}.onnx" for s in stages] + [b / "manifest.toml", b / "manifest.sha256",
+                                                b / "reference.safetensors"]
     files += [g / "lut.safetensors"] + [g / f"frame_{i:03d}.safetensors" for i in range(N_FRAMES)]
     return files
 

@@ -20,6 +20,7 @@ pub enum DType {
 
 /// Name, shape and dtype of one stage input or output.
 #[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TensorSpec {
     /// Tensor name in the graph.
     pub name: String,
@@ -31,6 +32,7 @@ pub struct TensorSpec {
 
 /// One `[[stage]]` of the manifest.
 #[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct StageEntry {
     /// Stage name (see [`Stage::name`]).
     pub name: String,
@@ -46,6 +48,7 @@ pub struct StageEntry {
 
 /// The whole manifest.
 #[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Manifest {
     /// Model dimensions and configuration.
     pub model: ModelDims,
@@ -55,6 +58,36 @@ pub struct Manifest {
 }
 
 impl Manifest {
+    /// Parse the bytes of `manifest.toml` (UTF-8 TOML, no unknown keys).
+    ///
+    /// # Errors
+    /// The UTF-8 or TOML parser's message.
+    pub fn parse(bytes: &[u8]) -> Result<Self, String> {
+        let text = std::str::from_utf8(bytes).map_err(|e| e.to_string())?;
+        toml::from_str(text).map_err(|e| e.to_string())
+    }
+
+    /// Every entry names a runtime stage, and no stage is listed twice (an extra or repeated
+    /// entry would be ignored silently otherwise).
+    pub fn check_stage_names(&self) -> Result<(), BundleError> {
+        for (ix, entry) in self.stages.iter().enumerate() {
+            let reason = if !Stage::ALL.iter().any(|s| s.name() == entry.name) {
+                Some("unknown stage")
+            } else if self.stages[..ix].iter().any(|e| e.name == entry.name) {
+                Some("listed twice")
+            } else {
+                None
+            };
+            if let Some(reason) = reason {
+                return Err(BundleError::StageEntry {
+                    name: entry.name.clone(),
+                    reason,
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// The entry of `stage`.
     pub fn stage(&self, stage: Stage) -> Result<&StageEntry, BundleError> {
         self.stages

@@ -1,19 +1,24 @@
-//! Bundles: a folder with `manifest.toml` and the compiled stage files (std only).
+//! Bundles: a folder with `manifest.toml`, its digest `manifest.sha256` and the compiled stage
+//! files (std only).
 //!
 //! The manifest (format in `ARCHITECTURE.md`) carries the model dimensions and, per stage, the
-//! file, its SHA-256 and its input/output names, shapes and dtypes. Loading checks every file's
-//! hash and that every stage's interface is exactly what the runtime's fixed buffers hold, so a
-//! bundle that does not fit fails here with an error naming the stage and tensor, never later.
+//! file, its SHA-256 and its input/output names, shapes and dtypes. A bundle is one verified
+//! thing: opening it checks, in this order, the manifest against its digest (and against a digest
+//! the integrator pinned, if any), every manifest number against the runtime's ranges, every
+//! stage entry (known, once each, a plain file name inside the folder, the exact interface the
+//! runtime's fixed buffers hold) and every stage file against its SHA-256. The engine later
+//! parses the bytes [`Bundle::read_stage`] verified, never a path read again after hashing.
+//! Anything that does not fit fails here with an error naming the file, stage and tensor.
 
+mod digest;
 mod manifest;
 mod model_table;
 
+pub use digest::{DigestParseError, Sha256Digest};
 pub use manifest::{DType, Manifest, StageEntry, TensorSpec};
 pub use model_table::ModelTable;
 
-use std::path::{Path, PathBuf};
-
-use sha2::{Digest, Sha256};
+use std::path::{Component, Path, PathBuf};
 
 use crate::engine::Stage;
 use crate::model_dims::ModelDims;
@@ -28,6 +33,34 @@ pub enum BundleError {
         path: PathBuf,
         /// The OS error.
         source: std::io::Error,
+    },
+    /// `manifest.sha256` is not one strict lowercase hex SHA-256.
+    #[error("{path}: {reason}")]
+    DigestFile {
+        /// The digest file.
+        path: PathBuf,
+        /// What is wrong with its text.
+        reason: DigestParseError,
+    },
+    /// `manifest.toml` differs from the digest recorded beside it.
+    #[error("{path} has sha256 {actual}, manifest.sha256 says {recorded}")]
+    ManifestDigest {
+        /// The manifest file.
+        path: PathBuf,
+        /// Digest in `manifest.sha256`.
+        recorded: Sha256Digest,
+        /// Digest of the manifest's bytes.
+        actual: Sha256Digest,
+    },
+    /// The bundle is not the one the integrator pinned.
+    #[error("bundle {dir} has digest {actual}, the pinned digest is {pinned}")]
+    NotPinned {
+        /// The bundle folder.
+        dir: PathBuf,
+        /// The pinned digest.
+        pinned: Sha256Digest,
+        /// The bundle's digest.
+        actual: Sha256Digest,
     },
     /// `manifest.toml` is not valid TOML or misses fields.
     #[error("invalid manifest {path}: {message}")]
@@ -51,17 +84,41 @@ pub enum BundleError {
         /// The stage name.
         stage: &'static str,
     },
+    /// A stage entry the runtime has no stage for, or a second entry of one stage.
+    #[error("manifest stage `{name}`: {reason}")]
+    StageEntry {
+        /// The entry's name.
+        name: String,
+        /// "unknown stage" or "listed twice".
+        reason: &'static str,
+    },
+    /// A stage file that is not a plain file name inside the bundle folder (`../x`, `/x`, `a/b`).
+    #[error("stage `{stage}`: file `{file}` is not a plain file name inside the bundle")]
+    StagePath {
+        /// The stage name.
+        stage: &'static str,
+        /// The file as the manifest spells it.
+        file: String,
+    },
+    /// A stage entry's `sha256` is not one strict lowercase hex SHA-256.
+    #[error("stage `{stage}`: sha256 in the manifest: {reason}")]
+    StageDigest {
+        /// The stage name.
+        stage: &'static str,
+        /// What is wrong with the text.
+        reason: DigestParseError,
+    },
     /// A stage file's SHA-256 differs from the manifest's.
     #[error("stage `{stage}`: {file} has sha256 {actual}, manifest says {expected}")]
     Checksum {
         /// The stage name.
-        stage: String,
+        stage: &'static str,
         /// The stage file.
         file: PathBuf,
         /// Hash in the manifest.
-        expected: String,
+        expected: Sha256Digest,
         /// Hash of the file.
-        actual: String,
+        actual: Sha256Digest,
     },
     /// A stage interface differs from what the runtime's buffers hold.
     #[error("stage `{stage}`: {what} `{tensor}` is {found}, the runtime expects {expected}")]
@@ -87,56 +144,111 @@ pub enum BundleError {
     },
 }
 
-/// A verified bundle on disk: its folder, manifest and the checked interface of every stage.
+/// File name of the manifest inside a bundle folder.
+pub const MANIFEST_FILE: &str = "manifest.toml";
+
+/// File name of the manifest's digest inside a bundle folder.
+pub const DIGEST_FILE: &str = "manifest.sha256";
+
+/// A verified bundle on disk: its folder, digest, manifest and the checked interface and hash of
+/// every stage.
 #[derive(Clone, Debug)]
 pub struct Bundle {
     dir: PathBuf,
+    digest: Sha256Digest,
     manifest: Manifest,
+    stage_digests: [Sha256Digest; Stage::ALL.len()],
 }
 
 impl Bundle {
-    /// Read `dir/manifest.toml`, verify every stage file's SHA-256 and check every stage's
-    /// interface against the runtime's expectations for the manifest's dimensions.
+    /// Open and verify the bundle in `dir` (see the module doc for every check).
+    ///
+    /// # Errors
+    /// The first check that fails, as a [`BundleError`] naming the file and stage.
     pub fn open(dir: impl AsRef<Path>) -> Result<Self, BundleError> {
-        let dir = dir.as_ref().to_path_buf();
-        let path = dir.join("manifest.toml");
-        let text = std::fs::read_to_string(&path).map_err(|source| BundleError::Io {
+        Self::open_checked(dir.as_ref(), None)
+    }
+
+    /// [`Bundle::open`], and refuse any bundle whose digest is not `pinned`: the integrator's
+    /// way to accept exactly one bundle (the digest `check-bundle` prints).
+    ///
+    /// # Errors
+    /// [`BundleError::NotPinned`] for another bundle, else as [`Bundle::open`].
+    pub fn open_pinned(dir: impl AsRef<Path>, pinned: Sha256Digest) -> Result<Self, BundleError> {
+        Self::open_checked(dir.as_ref(), Some(pinned))
+    }
+
+    fn open_checked(dir: &Path, pinned: Option<Sha256Digest>) -> Result<Self, BundleError> {
+        let dir = dir.to_path_buf();
+        let path = dir.join(MANIFEST_FILE);
+        let bytes = read(&path)?;
+        let digest_path = dir.join(DIGEST_FILE);
+        let digest_text = read(&digest_path)?;
+        let recorded = std::str::from_utf8(&digest_text)
+            .map_err(|e| DigestParseError::NotLowerHex(e.valid_up_to()))
+            .and_then(Sha256Digest::parse)
+            .map_err(|reason| BundleError::DigestFile {
+                path: digest_path,
+                reason,
+            })?;
+        let digest = Sha256Digest::of(&bytes);
+        if digest != recorded {
+            return Err(BundleError::ManifestDigest {
+                path,
+                recorded,
+                actual: digest,
+            });
+        }
+        if let Some(pinned) = pinned
+            && pinned != digest
+        {
+            return Err(BundleError::NotPinned {
+                dir,
+                pinned,
+                actual: digest,
+            });
+        }
+        let manifest = Manifest::parse(&bytes).map_err(|message| BundleError::Manifest {
             path: path.clone(),
-            source,
-        })?;
-        let manifest: Manifest = toml::from_str(&text).map_err(|e| BundleError::Manifest {
-            path: path.clone(),
-            message: e.to_string(),
+            message,
         })?;
         manifest.model.validate().map_err(|e| BundleError::Dims {
             path: path.clone(),
             reason: e.to_string(),
         })?;
-        for stage in Stage::ALL {
+        manifest.check_stage_names()?;
+        let mut stage_digests = [digest; Stage::ALL.len()];
+        for (slot, stage) in stage_digests.iter_mut().zip(Stage::ALL) {
             let entry = manifest.stage(stage)?;
             entry.check_interface(stage, &manifest.model)?;
-            let file = dir.join(&entry.file);
-            let bytes = std::fs::read(&file).map_err(|source| BundleError::Io {
-                path: file.clone(),
-                source,
-            })?;
-            let actual = hex(&Sha256::digest(&bytes));
-            if !actual.eq_ignore_ascii_case(&entry.sha256) {
-                return Err(BundleError::Checksum {
-                    stage: entry.name.clone(),
-                    file,
-                    expected: entry.sha256.clone(),
-                    actual,
-                });
-            }
+            let expected =
+                Sha256Digest::parse(&entry.sha256).map_err(|reason| BundleError::StageDigest {
+                    stage: stage.name(),
+                    reason,
+                })?;
+            let file = stage_file(&dir, stage, &entry.file)?;
+            let bytes = read(&file)?;
+            verify(stage, file, bytes, expected)?;
+            *slot = expected;
         }
-        Ok(Self { dir, manifest })
+        Ok(Self {
+            dir,
+            digest,
+            manifest,
+            stage_digests,
+        })
     }
 
     /// The bundle's folder.
     #[must_use]
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// The bundle digest (SHA-256 of `manifest.toml`), the one value an integrator pins.
+    #[must_use]
+    pub const fn digest(&self) -> Sha256Digest {
+        self.digest
     }
 
     /// The parsed manifest.
@@ -151,18 +263,61 @@ impl Bundle {
         &self.manifest.model
     }
 
-    /// Path of a stage's graph file.
+    /// Path of a stage's graph file (for tools; the engine loads [`Bundle::read_stage`]).
     pub fn stage_path(&self, stage: Stage) -> Result<PathBuf, BundleError> {
-        Ok(self.dir.join(&self.manifest.stage(stage)?.file))
+        stage_file(&self.dir, stage, &self.manifest.stage(stage)?.file)
+    }
+
+    /// The bytes of `stage`'s graph, read once and checked against the manifest's SHA-256: what
+    /// the engine parses, so a file changed after [`Bundle::open`] is refused, not loaded.
+    ///
+    /// # Errors
+    /// [`BundleError::Io`] or [`BundleError::Checksum`] naming the stage and file.
+    pub fn read_stage(&self, stage: Stage) -> Result<Vec<u8>, BundleError> {
+        let file = self.stage_path(stage)?;
+        let bytes = read(&file)?;
+        verify(stage, file, bytes, self.stage_digests[stage as usize])
     }
 }
 
-fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write;
-    bytes
-        .iter()
-        .fold(String::with_capacity(bytes.len() * 2), |mut s, b| {
-            let _ = write!(s, "{b:02x}");
-            s
+fn read(path: &Path) -> Result<Vec<u8>, BundleError> {
+    std::fs::read(path).map_err(|source| BundleError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// `dir/file`, if `file` is one plain name (no separator, no `..`, not absolute).
+fn stage_file(dir: &Path, stage: Stage, file: &str) -> Result<PathBuf, BundleError> {
+    let mut parts = Path::new(file).components();
+    let plain = matches!(parts.next(), Some(Component::Normal(_)))
+        && parts.next().is_none()
+        && !file.contains(['/', '\\', '\0']);
+    if plain {
+        Ok(dir.join(file))
+    } else {
+        Err(BundleError::StagePath {
+            stage: stage.name(),
+            file: file.to_owned(),
         })
+    }
+}
+
+fn verify(
+    stage: Stage,
+    file: PathBuf,
+    bytes: Vec<u8>,
+    expected: Sha256Digest,
+) -> Result<Vec<u8>, BundleError> {
+    let actual = Sha256Digest::of(&bytes);
+    if actual == expected {
+        Ok(bytes)
+    } else {
+        Err(BundleError::Checksum {
+            stage: stage.name(),
+            file,
+            expected,
+            actual,
+        })
+    }
 }

@@ -4,8 +4,9 @@
 use crate::capacity::NUM_HEADS;
 use crate::model_dims::{CLASS_NAMES, MANIFEST_CAMERAS, ModelDims};
 
-/// Raw `[model]` table (see `ARCHITECTURE.md`, "Bundle").
+/// Raw `[model]` table (see `ARCHITECTURE.md`, "Bundle"); only serde builds it.
 #[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ModelTable {
     #[allow(
         dead_code,

@@ -1,6 +1,7 @@
 //! The tract graph engine: runs a bundle's stages over the runtime's fixed buffers (std only).
 //!
-//! Each stage is loaded once from ONNX with its static input facts, optimised, turned into a
+//! Each stage is loaded once from the ONNX bytes the bundle verified (never re-read by path),
+//! its inputs and outputs bound by name, given its static input facts, optimised, turned into a
 //! plan, and given one reused state for the life of the engine (optimisation dominates load
 //! time, so the plan is never rebuilt). Inputs are held in reference-counted tensors that are
 //! overwritten in place every run, so feeding a stage copies the runtime buffer into tract's
@@ -34,14 +35,21 @@ struct StageRunner {
 impl StageRunner {
     fn load(bundle: &Bundle, stage: Stage) -> Result<Self, BundleError> {
         let entry = bundle.manifest().stage(stage)?;
-        let path = bundle.stage_path(stage)?;
+        let bytes = bundle.read_stage(stage)?;
         let engine_err = |e: TractError| BundleError::Engine {
             stage: stage.name(),
             message: format!("{e:#}"),
         };
         let mut model = tract_onnx::onnx()
-            .model_for_path(&path)
+            .model_for_read(&mut bytes.as_slice())
             .map_err(engine_err)?;
+        drop(bytes);
+        check_io_names(
+            stage,
+            &model,
+            entry.inputs.as_slice(),
+            entry.outputs.as_slice(),
+        )?;
         for (ix, spec) in entry.inputs.iter().enumerate() {
             model = model
                 .with_input_fact(ix, InferenceFact::dt_shape(datum(spec.dtype), &spec.shape))
@@ -176,6 +184,64 @@ fn datum(dtype: DType) -> DatumType {
         DType::I64 => DatumType::I64,
         DType::F32 => DatumType::F32,
     }
+}
+
+/// Bind by name: the graph's inputs and outputs must carry the manifest's names in the
+/// manifest's order (which [`crate::bundle::StageEntry::check_interface`] has checked is the
+/// runtime's). Two same-shape tensors swapped in the graph would otherwise load and run with
+/// each buffer fed to the other's place.
+fn check_io_names(
+    stage: Stage,
+    model: &InferenceModel,
+    inputs: &[TensorSpec],
+    outputs: &[TensorSpec],
+) -> Result<(), BundleError> {
+    let engine_err = |e: TractError| BundleError::Engine {
+        stage: stage.name(),
+        message: format!("{e:#}"),
+    };
+    let input_names: Vec<&str> = model
+        .input_outlets()
+        .map_err(engine_err)?
+        .iter()
+        .map(|o| model.node(o.node).name.as_str())
+        .collect();
+    let output_names: Vec<&str> = model
+        .output_outlets()
+        .map_err(engine_err)?
+        .iter()
+        .map(|&o| {
+            model
+                .outlet_label(o)
+                .unwrap_or(model.node(o.node).name.as_str())
+        })
+        .collect();
+    for (what, names, specs) in [
+        ("input", input_names, inputs),
+        ("output", output_names, outputs),
+    ] {
+        if names.len() != specs.len() {
+            return Err(BundleError::Interface {
+                stage: stage.name(),
+                what,
+                tensor: "*".into(),
+                found: format!("{} tensors in the graph", names.len()),
+                expected: format!("{} tensors", specs.len()),
+            });
+        }
+        for (ix, (name, spec)) in names.iter().zip(specs).enumerate() {
+            if *name != spec.name {
+                return Err(BundleError::Interface {
+                    stage: stage.name(),
+                    what,
+                    tensor: spec.name.clone(),
+                    found: format!("graph {what} {ix} named `{name}`"),
+                    expected: format!("`{}` at position {ix}", spec.name),
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Check the optimised plan's input and output facts against the manifest.
