@@ -18,6 +18,7 @@ use glam::DVec2;
 
 use super::cache::{PREFETCH_TILES_PER_STEP, TileCache, TileState};
 use super::format::{CHANNELS, PackError, RoutePack, TileKey};
+use super::route::{RouteCursor, distance_to_route_m, walk_ahead};
 use crate::pose::EgoPose;
 use crate::satellite::{Coverage, CropSpec, SatelliteSource};
 
@@ -30,9 +31,6 @@ pub const FILL_RGB: [u8; 3] = [0, 0, 0];
 pub const MAX_CROP_TILES: usize = 36;
 /// Most points sampled ahead along the route per step when choosing tiles to prefetch.
 const MAX_PREFETCH_SAMPLES: usize = 16;
-/// Route segments searched behind / ahead of the last nearest one before a full scan.
-const ROUTE_SEARCH_BACK: usize = 16;
-const ROUTE_SEARCH_AHEAD: usize = 128;
 
 /// Why a crop could not be attempted (the output is all fill and coverage is `None`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -183,7 +181,7 @@ fn blend(a: u8, b: u8, c: u8, d: u8, fx: u64, fy: u64) -> u8 {
 pub struct PackSource<'a> {
     pack: RoutePack<'a>,
     cache: TileCache,
-    route_cursor: usize,
+    route: RouteCursor,
     last: CropReport,
 }
 
@@ -194,7 +192,7 @@ impl<'a> PackSource<'a> {
         Self {
             pack,
             cache: TileCache::new(),
-            route_cursor: 0,
+            route: RouteCursor::new(),
             last: CropReport::EMPTY,
         }
     }
@@ -224,8 +222,7 @@ impl<'a> PackSource<'a> {
     /// ("pose inside the route"), not for every pixel.
     #[must_use]
     pub fn distance_to_route_m(&self, p: DVec2) -> Option<f64> {
-        let segments = self.pack.route_point_count().checked_sub(1)?;
-        self.nearest_in(p, 0, segments).map(|(_, _, d)| d)
+        distance_to_route_m(&self.pack, p)
     }
 
     /// Report of the last crop.
@@ -423,10 +420,9 @@ impl<'a> PackSource<'a> {
             return;
         }
         let side_m = self.pack.tile_side_m();
-        let Some((segment, start)) = self.nearest_on_route(pose.position_m, side_m) else {
+        let Some((segment, start)) = self.route.locate(&self.pack, pose.position_m, side_m) else {
             return;
         };
-        self.route_cursor = segment;
         let x_far_m = spec
             .x_min_m
             .abs()
@@ -436,31 +432,16 @@ impl<'a> PackSource<'a> {
             .abs()
             .max((spec.y_min_m + spec.height_px as f64 * spec.gsd_m).abs());
         let reach_m = libm::hypot(x_far_m, y_far_m);
-        let step_m = 0.5 * side_m;
         let budget_start = self.cache.verified_this_step();
-        let mut to_next_m = step_m;
-        let mut from = start;
-        let mut samples = 0;
-        for seg in segment..points - 1 {
-            let Some(to) = self.pack.route_point(seg + 1) else {
-                break;
-            };
-            let seg_len_m = from.distance(to);
-            let mut along_m = 0.0;
-            while along_m + to_next_m <= seg_len_m {
-                along_m += to_next_m;
-                to_next_m = step_m;
-                let p = from + (to - from) * (along_m / seg_len_m);
-                if self.prefetch_around(p, reach_m, budget_start)
-                    || samples + 1 >= MAX_PREFETCH_SAMPLES
-                {
-                    return;
-                }
-                samples += 1;
-            }
-            to_next_m -= seg_len_m - along_m;
-            from = to;
-        }
+        let pack = self.pack;
+        walk_ahead(
+            &pack,
+            segment,
+            start,
+            0.5 * side_m,
+            MAX_PREFETCH_SAMPLES,
+            |p| self.prefetch_around(p, reach_m, budget_start),
+        );
     }
 
     /// Verify uncached tiles within `reach_m` of `p`; true when the step's budget is spent.
@@ -493,45 +474,6 @@ impl<'a> PackSource<'a> {
             }
         }
         self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP
-    }
-
-    /// Nearest route segment to `p` and the nearest point on it. Searches around the last
-    /// answer first; a full scan only when the vehicle is not near that stretch.
-    fn nearest_on_route(&self, p: DVec2, near_m: f64) -> Option<(usize, DVec2)> {
-        let segments = self.pack.route_point_count().checked_sub(1)?;
-        let lo = self
-            .route_cursor
-            .saturating_sub(ROUTE_SEARCH_BACK)
-            .min(segments);
-        let hi = (self.route_cursor + ROUTE_SEARCH_AHEAD).min(segments);
-        let local = self.nearest_in(p, lo, hi);
-        match local {
-            Some((_, _, d)) if d <= near_m => local.map(|(s, q, _)| (s, q)),
-            _ => self.nearest_in(p, 0, segments).map(|(s, q, _)| (s, q)),
-        }
-    }
-
-    fn nearest_in(&self, p: DVec2, lo: usize, hi: usize) -> Option<(usize, DVec2, f64)> {
-        let mut best: Option<(usize, DVec2, f64)> = None;
-        for seg in lo..hi {
-            let (Some(a), Some(b)) = (self.pack.route_point(seg), self.pack.route_point(seg + 1))
-            else {
-                break;
-            };
-            let ab = b - a;
-            let len2 = ab.length_squared();
-            let t = if len2 > 0.0 {
-                ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let q = a + ab * t;
-            let d = q.distance(p);
-            if best.is_none_or(|(_, _, bd)| d < bd) {
-                best = Some((seg, q, d));
-            }
-        }
-        best
     }
 }
 

@@ -10,6 +10,8 @@
 //! - [`cache`]: the fixed-capacity cache of verified tiles ([`TILE_CACHE_TILES`]).
 //! - [`crop`]: the ego-centred, yaw-rotated bilinear crop and [`PackSource`], the pack-backed
 //!   [`crate::satellite::SatelliteSource`], with route-ahead prefetch.
+//! - `route`: route following, where the vehicle is on the route polyline and the walk ahead
+//!   of it that the prefetch samples.
 //!
 //! Per-step work is bounded: at most [`MAX_CROP_TILES`] tiles hashed for the crop (only those
 //! not already verified in the cache) plus [`PREFETCH_TILES_PER_STEP`] ahead on the route; the
@@ -24,6 +26,7 @@
 pub mod cache;
 pub mod crop;
 pub mod format;
+mod route;
 pub mod writer;
 
 pub use cache::{PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES};
