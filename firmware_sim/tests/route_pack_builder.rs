@@ -12,9 +12,10 @@ use satmap_runtime::geo::{EnuFrame, Geodetic, TileId, WorldPixel};
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::{PackSource, RoutePack};
 use satmap_runtime::satellite::{Coverage, CropSpec};
+use satmap_sim::route_pack_builder::imagery::Gap;
 use satmap_sim::route_pack_builder::{
-    BuildError, BuildOptions, SlippyTiles, WorldCrs, WorldFileImage, build_pack,
-    parse_route_geojson,
+    BuildError, BuildOptions, Imagery, PAPER_CROP, SlippyTiles, WorldCrs, WorldFileImage,
+    build_pack, parse_route_geojson,
 };
 
 const ORIGIN: Geodetic = Geodetic::new(42.336, -71.057, 0.0);
@@ -353,6 +354,9 @@ fn build_pack_command_writes_a_loadable_pack() {
         corridor_m: 20.0,
         gsd_m: 0.25,
         tile_px: 64,
+        crop_h_px: 80,
+        crop_w_px: 80,
+        crop_gsd_m: 0.25,
         allow_missing: false,
         quiet: true,
         origin: None,
@@ -364,7 +368,329 @@ fn build_pack_command_writes_a_loadable_pack() {
         tile_px: 100,
         ..args
     };
+    // A missing route names the file once, then the OS's reason.
+    let missing = satmap_sim::cli::build_pack::Args {
+        route: dir.join("gone.geojson"),
+        tile_px: 64,
+        ..bad.clone()
+    };
+    let err = satmap_sim::cli::build_pack::run(&missing).unwrap_err();
+    let text = format!("{err:#}");
+    assert_eq!(text.matches("gone.geojson").count(), 1, "{text}");
+    assert!(text.starts_with("cannot read "), "{text}");
     let err = satmap_sim::cli::build_pack::run(&bad).unwrap_err();
-    assert!(err.to_string().contains("power of two"), "{err}");
+    assert_eq!(
+        format!("{err:#}"),
+        "--tile-px 100 is outside the powers of two 8..=1024 px"
+    );
+    // Numbers are checked before any file is read: a NaN gsd with a route that does not exist.
+    let nan = satmap_sim::cli::build_pack::Args {
+        gsd_m: f64::NAN,
+        route: dir.join("no_such_route.geojson"),
+        ..bad
+    };
+    let err = satmap_sim::cli::build_pack::run(&nan).unwrap_err();
+    assert_eq!(
+        format!("{err:#}"),
+        "--gsd-m NaN is outside (0.001, 100] m/px"
+    );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Imagery that must not be touched: the checks below all come before any imagery work.
+struct Untouchable;
+
+impl Imagery for Untouchable {
+    fn project(&self, _lat_deg: f64, _lon_deg: f64) -> DVec2 {
+        panic!("imagery projected before the up-front checks refused the build")
+    }
+    fn sample(&mut self, _p: DVec2) -> Result<Result<[u8; 3], Gap>, BuildError> {
+        panic!("imagery sampled before the up-front checks refused the build")
+    }
+    fn gap_error(&self, _gap: &Gap, _lat_deg: f64, _lon_deg: f64) -> BuildError {
+        BuildError::Empty
+    }
+}
+
+fn refused(route_m: &[DVec2], opts: &BuildOptions) -> BuildError {
+    build_pack(&mut Untouchable, &route(route_m), opts).unwrap_err()
+}
+
+/// A 4 x 4 px crop: small enough that 8 px tiles pass the crop check, so the size checks are
+/// what refuses.
+const TINY_CROP: CropSpec = CropSpec {
+    height_px: 4,
+    width_px: 4,
+    gsd_m: 0.15,
+    x_min_m: -0.3,
+    y_min_m: -0.3,
+};
+
+#[test]
+fn numeric_options_out_of_range_name_the_flag() {
+    let line = [DVec2::ZERO, DVec2::new(50.0, 0.0)];
+    let base = BuildOptions::default();
+    let cases: [(BuildOptions, &str); 12] = [
+        (
+            BuildOptions {
+                gsd_m: f64::NAN,
+                ..base.clone()
+            },
+            "--gsd-m",
+        ),
+        (
+            BuildOptions {
+                gsd_m: -0.15,
+                ..base.clone()
+            },
+            "--gsd-m",
+        ),
+        (
+            BuildOptions {
+                gsd_m: f64::INFINITY,
+                ..base.clone()
+            },
+            "--gsd-m",
+        ),
+        (
+            BuildOptions {
+                gsd_m: 0.001,
+                ..base.clone()
+            },
+            "--gsd-m",
+        ),
+        (
+            BuildOptions {
+                corridor_width_m: f64::NAN,
+                ..base.clone()
+            },
+            "--corridor-m",
+        ),
+        (
+            BuildOptions {
+                corridor_width_m: -1.0,
+                ..base.clone()
+            },
+            "--corridor-m",
+        ),
+        (
+            BuildOptions {
+                corridor_width_m: 10_000.5,
+                ..base.clone()
+            },
+            "--corridor-m",
+        ),
+        (
+            BuildOptions {
+                tile_size_px: 100,
+                ..base.clone()
+            },
+            "--tile-px",
+        ),
+        (
+            BuildOptions {
+                tile_size_px: 2048,
+                ..base.clone()
+            },
+            "--tile-px",
+        ),
+        (
+            BuildOptions {
+                crop: CropSpec {
+                    height_px: 0,
+                    ..PAPER_CROP
+                },
+                ..base.clone()
+            },
+            "--crop-h-px",
+        ),
+        (
+            BuildOptions {
+                crop: CropSpec {
+                    width_px: 5000,
+                    ..PAPER_CROP
+                },
+                ..base.clone()
+            },
+            "--crop-w-px",
+        ),
+        (
+            BuildOptions {
+                crop: CropSpec {
+                    gsd_m: f64::NAN,
+                    ..PAPER_CROP
+                },
+                ..base.clone()
+            },
+            "--crop-gsd-m",
+        ),
+    ];
+    for (opts, flag) in cases {
+        let err = refused(&line, &opts);
+        assert!(
+            matches!(&err, BuildError::OptionRange { option, .. } if *option == flag),
+            "{flag}: {err}"
+        );
+        assert!(err.to_string().starts_with(flag), "{err}");
+    }
+}
+
+#[test]
+fn tiles_of_8_to_64_px_are_too_small_for_the_paper_crop() {
+    // The 400 x 200 crop at 0.15 m/px on a 0.15 m/px pack spans 8 x 8 = 64 tiles of 64 px at
+    // 45 deg (and 8 x 5 = 40 at 0 deg): every crop would fail. 128 px tiles: 25 at worst.
+    let line = [DVec2::ZERO, DVec2::new(50.0, 0.0)];
+    for tile_size_px in [8u16, 16, 32, 64] {
+        let opts = BuildOptions {
+            tile_size_px,
+            ..BuildOptions::default()
+        };
+        let err = refused(&line, &opts);
+        match err {
+            BuildError::TilesTooSmallForCrop {
+                tiles,
+                max_tiles: 36,
+                min_tile_px: Some(128),
+                ..
+            } => {
+                assert!(tiles > 36, "{tile_size_px} px: {tiles}");
+                if tile_size_px == 64 {
+                    assert_eq!(tiles, 64);
+                }
+            }
+            other => panic!("{tile_size_px} px: {other}"),
+        }
+    }
+    let ok = BuildOptions {
+        tile_size_px: 128,
+        ..BuildOptions::default()
+    };
+    ok.validate().unwrap();
+    let err = refused(
+        &line,
+        &BuildOptions {
+            tile_size_px: 64,
+            ..ok
+        },
+    );
+    assert!(
+        err.to_string().contains("use --tile-px 128 or larger"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_sub_millimetre_gsd_is_refused_before_any_tile_is_listed() {
+    // 0.0011 m/px: the 60 m x 30 m crop is over 54 000 px long, more than 36 tiles even of
+    // 1024 px, so no tile size fits.
+    let opts = BuildOptions {
+        gsd_m: 0.0011,
+        ..BuildOptions::default()
+    };
+    let err = refused(&[DVec2::ZERO, DVec2::new(1000.0, 0.0)], &opts);
+    assert!(
+        matches!(err, BuildError::TilesTooSmallForCrop { min_tile_px: None, tiles, .. } if tiles > 36),
+        "{err}"
+    );
+    assert!(err.to_string().contains("use a coarser --gsd-m"), "{err}");
+}
+
+#[test]
+fn a_10_km_corridor_at_8_px_tiles_is_refused_by_count() {
+    // 1.2 m tiles, 5 km either side of a 101 m route east: rows floor(-5000 / 1.2) = -4167 to
+    // floor(5000 / 1.2) = 4166 (8334), columns -4167 to floor(5101 / 1.2) = 4250 (8418):
+    // 70 155 612 tiles against the format's 1 000 000.
+    let opts = BuildOptions {
+        corridor_width_m: 10_000.0,
+        tile_size_px: 8,
+        crop: TINY_CROP,
+        ..BuildOptions::default()
+    };
+    let err = refused(&[DVec2::ZERO, DVec2::new(101.0, 0.0)], &opts);
+    assert!(
+        matches!(
+            err,
+            BuildError::PackTooLarge {
+                what: "tiles",
+                needed: 70_155_612,
+                limit: 1_000_000,
+                ..
+            }
+        ),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_pack_larger_than_the_route_pack_region_is_refused_by_size() {
+    // 256 px tiles of 38.4 m, 40 m either side of a 3001 m route east: rows -2..=1 (4),
+    // columns -2..=floor(3041 / 38.4) = 79 (82): 328 tiles. 80 + 2 * 16 + 328 * 16 +
+    // 328 * 196 608 = 64 492 784 bytes against the 32 MiB region.
+    let opts = BuildOptions {
+        corridor_width_m: 80.0,
+        ..BuildOptions::default()
+    };
+    let err = refused(&[DVec2::ZERO, DVec2::new(3001.0, 0.0)], &opts);
+    assert!(
+        matches!(
+            err,
+            BuildError::PackTooLarge {
+                what: "bytes",
+                needed: 64_492_784,
+                limit: 33_554_432,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(
+        err.to_string()
+            .contains("route_pack region of memory_layout.toml"),
+        "{err}"
+    );
+}
+
+#[test]
+fn too_many_route_points_or_corridor_runs_are_refused() {
+    let frame = EnuFrame::new(ORIGIN);
+    let points = |n: usize, spacing_m: f64| -> Vec<Geodetic> {
+        (0..n)
+            .map(|i| frame.enu_to_geodetic(DVec3::new(i as f64 * spacing_m, 0.0, 0.0)))
+            .collect()
+    };
+    let opts = BuildOptions::default();
+    let err = build_pack(&mut Untouchable, &points(1_000_001, 0.001), &opts).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            BuildError::PackTooLarge {
+                what: "route points",
+                needed: 1_000_001,
+                limit: 1_000_000,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // A million points 1 mm apart, 1.2 m tiles, 61 m corridor: every segment spans rows
+    // floor(-30.5 / 1.2) = -26 to floor(30.5 / 1.2) = 25, 52 runs each: 51 999 948 runs.
+    let dense = BuildOptions {
+        corridor_width_m: 61.0,
+        tile_size_px: 8,
+        crop: TINY_CROP,
+        ..BuildOptions::default()
+    };
+    let err = build_pack(&mut Untouchable, &points(1_000_000, 0.001), &dense).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            BuildError::PackTooLarge {
+                what: "corridor runs (route segments x tile rows)",
+                needed: 51_999_948,
+                limit: 4_000_000,
+                ..
+            }
+        ),
+        "{err}"
+    );
 }

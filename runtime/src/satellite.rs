@@ -43,6 +43,10 @@ pub trait SatelliteSource {
     /// much of it is real imagery. Implementations must write every byte of `out` (fill where
     /// uncovered) and must not allocate.
     fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage;
+
+    /// Forget per-drive state (e.g. where the vehicle is on a route) when the runtime restarts;
+    /// called by [`crate::SatMap::reset`]. Bounded work, no allocation. Default: nothing.
+    fn reset(&mut self) {}
 }
 
 /// A source that never has imagery: every step runs degraded (camera only).

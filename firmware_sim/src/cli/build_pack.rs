@@ -7,11 +7,13 @@ use anyhow::{Context, Result};
 use satmap_runtime::geo::Geodetic;
 
 use crate::route_pack_builder::{
-    BuildOptions, Imagery, SlippyTiles, WorldCrs, WorldFileImage, build_pack, read_route_geojson,
+    BuildOptions, Imagery, PAPER_CROP, SlippyTiles, WorldCrs, WorldFileImage, build_pack,
+    read_route_geojson,
 };
+use satmap_runtime::satellite::CropSpec;
 
 /// Arguments of `build-pack`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Clone, Debug)]
 pub struct Args {
     /// Route: GeoJSON LineString in WGS84 (bare geometry, Feature or FeatureCollection).
     #[arg(long)]
@@ -40,9 +42,19 @@ pub struct Args {
     /// Ground sampling distance of the pack, metres per pixel.
     #[arg(long, default_value_t = 0.15)]
     pub gsd_m: f64,
-    /// Pack tile side, pixels (power of two).
+    /// Pack tile side, pixels (power of two, 8..=1024; large enough that one crop spans at most
+    /// the runtime's 36 tiles).
     #[arg(long, default_value_t = 256)]
     pub tile_px: u16,
+    /// Rows of the crop the model takes from the pack (`sat_h`).
+    #[arg(long, default_value_t = PAPER_CROP.height_px)]
+    pub crop_h_px: usize,
+    /// Columns of the crop (`sat_w`).
+    #[arg(long, default_value_t = PAPER_CROP.width_px)]
+    pub crop_w_px: usize,
+    /// Ground sampling distance of the crop, metres per pixel (`sat_gsd_m`).
+    #[arg(long, default_value_t = PAPER_CROP.gsd_m)]
+    pub crop_gsd_m: f64,
     /// Leave out pack tiles without imagery instead of failing.
     #[arg(long)]
     pub allow_missing: bool,
@@ -77,6 +89,22 @@ fn parse_origin(text: &str) -> Result<Geodetic, String> {
 /// # Errors
 /// Any [`crate::route_pack_builder::BuildError`], or the output cannot be written.
 pub fn run(args: &Args) -> Result<()> {
+    // Every numeric option is checked before any file is opened.
+    let opts = BuildOptions {
+        corridor_width_m: args.corridor_m,
+        gsd_m: args.gsd_m,
+        tile_size_px: args.tile_px,
+        allow_missing: args.allow_missing,
+        show_progress: !args.quiet,
+        origin: args.origin,
+        crop: CropSpec {
+            height_px: args.crop_h_px,
+            width_px: args.crop_w_px,
+            gsd_m: args.crop_gsd_m,
+            ..PAPER_CROP
+        },
+    };
+    opts.validate()?;
     let route = read_route_geojson(&args.route)?;
     let mut imagery: Box<dyn Imagery> = match (&args.tiles, &args.image) {
         (Some(dir), _) => Box::new(SlippyTiles::open(dir, args.zoom)?),
@@ -87,18 +115,10 @@ pub fn run(args: &Args) -> Result<()> {
         )?),
         (None, None) => anyhow::bail!("give --tiles DIR or --image FILE"),
     };
-    let opts = BuildOptions {
-        corridor_width_m: args.corridor_m,
-        gsd_m: args.gsd_m,
-        tile_size_px: args.tile_px,
-        allow_missing: args.allow_missing,
-        show_progress: !args.quiet,
-        origin: args.origin,
-    };
     let started = std::time::Instant::now();
     let built = build_pack(imagery.as_mut(), &route, &opts)?;
     std::fs::write(&args.out, &built.bytes)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
     println!(
         "{}: {} tiles ({} skipped), {:.1} MB, route {:.2} km, origin {:.7}, {:.7}, built in {:.1} s",
         args.out.display(),

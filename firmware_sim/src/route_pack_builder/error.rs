@@ -105,6 +105,58 @@ pub enum BuildError {
     /// An option is out of range.
     #[error("invalid option: {0}")]
     Option(String),
+    /// A numeric option is not finite or outside its range.
+    #[error("{option} {value} is outside {range}")]
+    OptionRange {
+        /// The option, as its `build-pack` flag.
+        option: &'static str,
+        /// The value given.
+        value: String,
+        /// The accepted range.
+        range: &'static str,
+    },
+    /// The pack's tiles are too small for the model's crop: the runtime samples at most
+    /// `MAX_CROP_TILES` tiles a crop, so every crop would fail.
+    #[error(
+        "--tile-px {tile_size_px} at --gsd-m {gsd_m}: a {crop_h_px}x{crop_w_px} px crop at \
+         {crop_gsd_m} m/px spans up to {tiles} tiles, more than the runtime's MAX_CROP_TILES \
+         ({max_tiles}); {}",
+        match min_tile_px {
+            Some(px) => format!("use --tile-px {px} or larger"),
+            None => "no tile size up to 1024 px fits: use a coarser --gsd-m".to_string(),
+        }
+    )]
+    TilesTooSmallForCrop {
+        /// Tile side asked for, pixels.
+        tile_size_px: u16,
+        /// Pack ground sampling distance, metres per pixel.
+        gsd_m: f64,
+        /// Crop rows.
+        crop_h_px: usize,
+        /// Crop columns.
+        crop_w_px: usize,
+        /// Crop ground sampling distance, metres per pixel.
+        crop_gsd_m: f64,
+        /// Most tiles one crop spans at the worst pose.
+        tiles: usize,
+        /// The runtime's limit.
+        max_tiles: usize,
+        /// Smallest tile side that fits, if any.
+        min_tile_px: Option<u16>,
+    },
+    /// The pack would exceed a limit of the pack format or of `memory_layout.toml`; found
+    /// before any imagery is read.
+    #[error("the pack needs {needed} {what}, more than {limit_name} ({limit})")]
+    PackTooLarge {
+        /// What is counted (`route points`, `tiles`, `bytes`, ...).
+        what: &'static str,
+        /// How many the pack needs.
+        needed: u64,
+        /// The limit.
+        limit: u64,
+        /// Where the limit comes from.
+        limit_name: &'static str,
+    },
     /// Every pack tile was skipped for missing imagery.
     #[error("no pack tile has imagery: nothing to write")]
     Empty,

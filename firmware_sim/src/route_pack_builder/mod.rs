@@ -9,15 +9,22 @@
 //!
 //! - [`route`]: reading the GeoJSON route.
 //! - [`imagery`]: the imagery sources ([`SlippyTiles`], [`WorldFileImage`]) behind [`Imagery`].
-//! - [`resample`]: choosing the pack tiles along the corridor and filling them.
+//! - [`options`]: [`BuildOptions`] and their checks (ranges, tiles large enough for the crop).
+//! - [`corridor`]: the corridor's tiles, counted and checked against the pack format and the
+//!   `route_pack` region of `memory_layout.toml` before any imagery is read.
+//! - [`resample`]: filling the pack tiles from the imagery.
 //! - [`error`]: the error enum, [`BuildError`].
 
+pub mod corridor;
 pub mod error;
 pub mod imagery;
+pub mod options;
 pub mod resample;
 pub mod route;
 
+pub use corridor::{MAX_CORRIDOR_RUNS, corridor_tiles};
 pub use error::BuildError;
 pub use imagery::{Imagery, SlippyTiles, WorldCrs, WorldFileImage};
-pub use resample::{BuildOptions, BuiltPack, build_pack};
+pub use options::{BuildOptions, PAPER_CROP};
+pub use resample::{BuiltPack, build_pack};
 pub use route::{parse_route_geojson, read_route_geojson};

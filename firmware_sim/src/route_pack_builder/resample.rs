@@ -9,51 +9,20 @@
 //! [`NODE_STEP_PX`] pixels; pixels in between interpolate the node's source coordinates
 //! bilinearly (the map is smooth: the interpolation error is far below 1e-3 source px).
 
-use std::collections::BTreeSet;
-
 use glam::{DVec2, DVec3};
 use indicatif::{ProgressBar, ProgressStyle};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::route_pack::{PackHeader, PackTile, TileKey, encode_pack};
 
+use super::corridor::corridor_tiles;
 use super::error::BuildError;
 use super::imagery::{Gap, Imagery};
+use super::options::BuildOptions;
 
 /// Spacing of exactly projected nodes inside a pack tile, pixels.
 pub const NODE_STEP_PX: usize = 16;
 /// Mean Earth radius for the tangent-plane drop, metres.
 const EARTH_RADIUS_M: f64 = 6_371_000.0;
-
-/// Options of a build.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BuildOptions {
-    /// Width of the corridor around the route that must be covered, metres.
-    pub corridor_width_m: f64,
-    /// Ground sampling distance of the pack, metres per pixel.
-    pub gsd_m: f64,
-    /// Pack tile side, pixels (a power of two, 8..=1024).
-    pub tile_size_px: u16,
-    /// Leave out pack tiles that lack imagery instead of failing.
-    pub allow_missing: bool,
-    /// Draw a progress bar on stderr.
-    pub show_progress: bool,
-    /// Origin of the route frame; `None`: the route's first point at ellipsoid height 0. Give
-    /// the frame the poses are expressed in (e.g. a synthetic world's anchor) to use it as is.
-    pub origin: Option<Geodetic>,
-}
-
-impl Default for BuildOptions {
-    fn default() -> Self {
-        Self {
-            corridor_width_m: 60.0,
-            gsd_m: 0.15,
-            tile_size_px: 256,
-            allow_missing: false,
-            show_progress: false,
-            origin: None,
-        }
-    }
-}
 
 /// A built pack and what went into it.
 #[derive(Clone, Debug)]
@@ -73,14 +42,15 @@ pub struct BuiltPack {
 /// Build a pack from `imagery` along `route`.
 ///
 /// # Errors
-/// Bad options, a route vertex outside the imagery, missing imagery under the corridor (unless
+/// Bad options ([`BuildOptions::validate`]), a pack too large for the format or the
+/// `route_pack` region (checked before any imagery is read), a route vertex outside the imagery, missing imagery under the corridor (unless
 /// `allow_missing`), unreadable images, or nothing to write.
 pub fn build_pack(
     imagery: &mut dyn Imagery,
     route: &[Geodetic],
     opts: &BuildOptions,
 ) -> Result<BuiltPack, BuildError> {
-    check_options(opts)?;
+    opts.validate()?;
     let origin = match (route.first(), opts.origin) {
         (Some(_), Some(origin)) if route.len() >= 2 => origin,
         (Some(p), None) if route.len() >= 2 => Geodetic::new(p.lat_deg, p.lon_deg, 0.0),
@@ -95,6 +65,8 @@ pub fn build_pack(
         .iter()
         .map(|p| frame.geodetic_to_enu(p).truncate())
         .collect();
+    // Sizes first: nothing is read from the imagery for a pack that cannot be written.
+    let keys = corridor_tiles(&route_m, opts)?;
     for (index, p) in route.iter().enumerate() {
         if let Err(gap) = imagery.sample(imagery.project(p.lat_deg, p.lon_deg))? {
             let detail = imagery.gap_error(&gap, p.lat_deg, p.lon_deg).to_string();
@@ -106,7 +78,6 @@ pub fn build_pack(
             });
         }
     }
-    let keys = corridor_tiles(&route_m, opts);
     let progress = if opts.show_progress {
         ProgressBar::new(keys.len() as u64)
     } else {
@@ -156,58 +127,6 @@ pub fn build_pack(
         skipped_tiles,
         route_length_m,
     })
-}
-
-fn check_options(opts: &BuildOptions) -> Result<(), BuildError> {
-    if !(opts.gsd_m.is_finite() && opts.gsd_m > 0.001 && opts.gsd_m <= 100.0) {
-        return Err(BuildError::Option(format!(
-            "gsd {} m/px is outside (0.001, 100]",
-            opts.gsd_m
-        )));
-    }
-    if !(opts.corridor_width_m.is_finite()
-        && opts.corridor_width_m >= 0.0
-        && opts.corridor_width_m <= 10_000.0)
-    {
-        return Err(BuildError::Option(format!(
-            "corridor width {} m is outside [0, 10000]",
-            opts.corridor_width_m
-        )));
-    }
-    if !(8..=1024).contains(&opts.tile_size_px) || !opts.tile_size_px.is_power_of_two() {
-        return Err(BuildError::Option(format!(
-            "tile size {} px is not a power of two in 8..=1024",
-            opts.tile_size_px
-        )));
-    }
-    Ok(())
-}
-
-/// Pack tiles within half the corridor width of the route (a square around points sampled at
-/// most a quarter tile apart, so no tile the corridor touches is missed).
-#[must_use]
-pub fn corridor_tiles(route_m: &[DVec2], opts: &BuildOptions) -> BTreeSet<TileKey> {
-    let side_m = f64::from(opts.tile_size_px) * opts.gsd_m;
-    let half_m = 0.5 * opts.corridor_width_m;
-    let step_m = (0.25 * side_m).min(half_m.max(opts.gsd_m));
-    let mut keys = BTreeSet::new();
-    let mut add = |p: DVec2| {
-        let lo = ((p - DVec2::splat(half_m)) / side_m).floor();
-        let hi = ((p + DVec2::splat(half_m)) / side_m).floor();
-        for ty in lo.y as i32..=hi.y as i32 {
-            for tx in lo.x as i32..=hi.x as i32 {
-                keys.insert(TileKey::new(tx, ty));
-            }
-        }
-    };
-    for w in route_m.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        let n = ((a.distance(b) / step_m).ceil() as usize).max(1);
-        for k in 0..=n {
-            add(a.lerp(b, k as f64 / n as f64));
-        }
-    }
-    keys
 }
 
 type TileFill = Result<Vec<u8>, (Gap, Geodetic)>;

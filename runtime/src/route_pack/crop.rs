@@ -17,8 +17,9 @@
 use glam::DVec2;
 
 use super::cache::{PREFETCH_TILES_PER_STEP, TileCache, TileState};
+use super::crop_bound::{Footprint, crop_tile_bound, footprint, tile_window};
 use super::format::{CHANNELS, PackError, RoutePack, TileKey};
-use super::route::{RouteCursor, distance_to_route_m, walk_ahead};
+use super::route::{RouteCursor, RouteState, distance_to_route_m};
 use crate::pose::EgoPose;
 use crate::satellite::{Coverage, CropSpec, SatelliteSource};
 
@@ -68,6 +69,11 @@ pub struct CropReport {
     pub prefetched_tiles: u8,
     /// Set when the crop could not be attempted.
     pub fault: Option<CropFault>,
+    /// Where the route cursor stands after this step (not moved on a fault).
+    pub route: RouteState,
+    /// Route segments the cursor examined this step; at most
+    /// [`super::MAX_ROUTE_SEGMENTS_PER_STEP`] whatever the route's length.
+    pub route_segments_examined: u32,
 }
 
 impl CropReport {
@@ -80,6 +86,8 @@ impl CropReport {
         verified_tiles: 0,
         prefetched_tiles: 0,
         fault: None,
+        route: RouteState::Searching,
+        route_segments_examined: 0,
     };
 
     /// Covered fraction, thousandths (0..=1000).
@@ -225,6 +233,36 @@ impl<'a> PackSource<'a> {
         distance_to_route_m(&self.pack, p)
     }
 
+    /// The route cursor (where the vehicle was last matched on the route).
+    #[must_use]
+    pub const fn route_cursor(&self) -> &RouteCursor {
+        &self.route
+    }
+
+    /// Forget where the vehicle was on the route: the next crops search for it again from the
+    /// route's start (bounded per step, see [`RouteCursor`]). Tile verdicts stay cached. Call it
+    /// when the runtime restarts ([`crate::SatMap::reset`] does, through
+    /// [`SatelliteSource::reset`]) or the vehicle is moved, e.g. a new drive on the same pack.
+    pub fn reset_route(&mut self) {
+        self.route.reset();
+    }
+
+    /// Check that crops of `spec` fit this pack's tiles at every pose: the sampler resolves
+    /// at most [`MAX_CROP_TILES`] tiles a crop, so a pack of tiles too small for the crop would
+    /// fail every crop. Call it once at load with the model's crop spec.
+    ///
+    /// # Errors
+    /// [`CropFault::BadSpec`] for a spec the sampler refuses, [`CropFault::TooManyTiles`] with
+    /// the worst-case tile count ([`crop_tile_bound`]) when it exceeds [`MAX_CROP_TILES`].
+    pub fn check_crop_spec(&self, spec: &CropSpec) -> Result<(), CropFault> {
+        let header = self.pack.header();
+        match crop_tile_bound(spec, header.gsd_m, header.tile_size_px) {
+            None => Err(CropFault::BadSpec),
+            Some(tiles) if tiles > MAX_CROP_TILES => Err(CropFault::TooManyTiles { tiles }),
+            Some(_) => Ok(()),
+        }
+    }
+
     /// Report of the last crop.
     #[must_use]
     pub const fn last_report(&self) -> &CropReport {
@@ -254,7 +292,10 @@ impl<'a> PackSource<'a> {
             let verified_for_crop = self.cache.verified_this_step();
             self.prefetch(pose, spec);
             report.prefetched_tiles = sat_u8(self.cache.verified_this_step() - verified_for_crop);
+            report.route_segments_examined =
+                u32::try_from(self.route.examined_last_step()).unwrap_or(u32::MAX);
         }
+        report.route = self.route.state();
         report.verified_tiles = sat_u8(self.cache.verified_this_step());
         report.coverage = if report.corrupt_tiles > 0 {
             Coverage::Corrupt
@@ -295,30 +336,14 @@ impl<'a> PackSource<'a> {
         if !spec_ok {
             return Err(CropFault::BadSpec);
         }
-        let pack_gsd_m = self.pack.header().gsd_m;
-        let (sin, cos) = libm::sincos(pose.yaw_rad);
-        let right = DVec2::new(sin, -cos);
-        let forward = DVec2::new(cos, sin);
-        let first = pose.position_m
-            + right * (spec.x_min_m + 0.5 * spec.gsd_m)
-            + forward * (spec.y_min_m + 0.5 * spec.gsd_m);
         // Pack-pixel coordinates are affine in (c, r): p(c, r) = p00 + c * dc + r * dr.
-        let p00 = first / pack_gsd_m - DVec2::splat(0.5);
-        let dc = right * (spec.gsd_m / pack_gsd_m);
-        let dr = forward * (spec.gsd_m / pack_gsd_m);
-        let (last_c, last_r) = ((w - 1) as f64, (h - 1) as f64);
-        let corners = [
+        let Footprint {
             p00,
-            p00 + dc * last_c,
-            p00 + dr * last_r,
-            p00 + dc * last_c + dr * last_r,
-        ];
-        let lo = corners
-            .iter()
-            .fold(DVec2::splat(f64::INFINITY), |a, p| a.min(*p));
-        let hi = corners
-            .iter()
-            .fold(DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+            dc,
+            dr,
+            lo,
+            hi,
+        } = footprint(pose, spec, self.pack.header().gsd_m);
         let size_px = i64::from(self.pack.header().tile_size_px);
         // Fixed point needs |u|, |v| < 2^30 px: beyond that (over 1000 km at 1 mm/px) is off
         // any pack this runtime reads, so the crop is all fill.
@@ -327,12 +352,7 @@ impl<'a> PackSource<'a> {
             fill(out);
             return Ok(());
         }
-        // One pixel of margin on each side absorbs rounding between corners and the pixel loop.
-        let tile_x0 = (libm::floor(lo.x) as i64 - 1).div_euclid(size_px);
-        let tile_y0 = (libm::floor(lo.y) as i64 - 1).div_euclid(size_px);
-        let tile_x1 = (libm::floor(hi.x) as i64 + 2).div_euclid(size_px);
-        let tile_y1 = (libm::floor(hi.y) as i64 + 2).div_euclid(size_px);
-        let (cols, rows) = (tile_x1 - tile_x0 + 1, tile_y1 - tile_y0 + 1);
+        let (tile_x0, tile_y0, cols, rows) = tile_window(lo, hi, size_px);
         let tiles = (cols * rows) as usize;
         if tiles > MAX_CROP_TILES {
             return Err(CropFault::TooManyTiles { tiles });
@@ -415,12 +435,9 @@ impl<'a> PackSource<'a> {
     /// will need: tiles within the crop's reach of points sampled every half tile over the next
     /// two tiles of route.
     fn prefetch(&mut self, pose: &EgoPose, spec: &CropSpec) {
-        let points = self.pack.route_point_count();
-        if points < 2 {
-            return;
-        }
         let side_m = self.pack.tile_side_m();
-        let Some((segment, start)) = self.route.locate(&self.pack, pose.position_m, side_m) else {
+        let capture_m = 0.5 * self.pack.header().corridor_width_m + side_m;
+        let Some(at) = self.route.step(&self.pack, pose.position_m, capture_m) else {
             return;
         };
         let x_far_m = spec
@@ -434,14 +451,11 @@ impl<'a> PackSource<'a> {
         let reach_m = libm::hypot(x_far_m, y_far_m);
         let budget_start = self.cache.verified_this_step();
         let pack = self.pack;
-        walk_ahead(
-            &pack,
-            segment,
-            start,
-            0.5 * side_m,
-            MAX_PREFETCH_SAMPLES,
-            |p| self.prefetch_around(p, reach_m, budget_start),
-        );
+        let mut route = self.route;
+        route.walk_ahead(&pack, at, 0.5 * side_m, MAX_PREFETCH_SAMPLES, |p| {
+            self.prefetch_around(p, reach_m, budget_start)
+        });
+        self.route = route;
     }
 
     /// Verify uncached tiles within `reach_m` of `p`; true when the step's budget is spent.
@@ -480,6 +494,10 @@ impl<'a> PackSource<'a> {
 impl SatelliteSource for PackSource<'_> {
     fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage {
         self.crop_with_report(pose, spec, out).coverage
+    }
+
+    fn reset(&mut self) {
+        self.reset_route();
     }
 }
 

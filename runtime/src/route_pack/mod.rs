@@ -10,12 +10,16 @@
 //! - [`cache`]: the fixed-capacity cache of verified tiles ([`TILE_CACHE_TILES`]).
 //! - [`crop`]: the ego-centred, yaw-rotated bilinear crop and [`PackSource`], the pack-backed
 //!   [`crate::satellite::SatelliteSource`], with route-ahead prefetch.
-//! - `route`: route following, where the vehicle is on the route polyline and the walk ahead
-//!   of it that the prefetch samples.
+//! - [`crop_bound`]: the tiles a crop spans, and [`crop_tile_bound`], the most at any pose
+//!   (a pack's tiles must be large enough for the model's crop).
+//! - [`route`]: route following, [`RouteCursor`]: where the vehicle is on the route polyline,
+//!   searched in a bounded window around the last match with a bounded re-acquire sweep.
 //!
 //! Per-step work is bounded: at most [`MAX_CROP_TILES`] tiles hashed for the crop (only those
 //! not already verified in the cache) plus [`PREFETCH_TILES_PER_STEP`] ahead on the route; the
-//! pixel loop itself only indexes a per-step table of at most `MAX_CROP_TILES` tile slices.
+//! pixel loop itself only indexes a per-step table of at most `MAX_CROP_TILES` tile slices; the
+//! route cursor examines at most [`MAX_ROUTE_SEGMENTS_PER_STEP`] route segments, whatever the
+//! route's length.
 //!
 //! Measured (criterion, x86-64, 2 shared cores under load 3-4, so upper bounds): crop
 //! 400 x 200 at 0.15 m/px 1.2-1.4 ms, 200 x 100 at 0.3 m/px 0.32 ms (`cargo bench -p
@@ -25,11 +29,17 @@
 
 pub mod cache;
 pub mod crop;
+pub mod crop_bound;
 pub mod format;
-mod route;
+pub mod route;
 pub mod writer;
 
 pub use cache::{PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES};
 pub use crop::{CropFault, CropReport, FILL_RGB, MAX_CROP_TILES, PackSource};
+pub use crop_bound::crop_tile_bound;
 pub use format::{PackError, PackHeader, RoutePack, TileKey};
+pub use route::{
+    MAX_ROUTE_SEGMENTS_PER_STEP, ROUTE_SWEEP_PER_STEP, ROUTE_WALK_SEGMENTS, ROUTE_WINDOW_AHEAD,
+    ROUTE_WINDOW_BACK, RouteCursor, RouteState,
+};
 pub use writer::{PackTile, encode_pack};

@@ -171,10 +171,13 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// way out if the first frame after init carried corrupt counters, since a first frame is
     /// never refused for its counters.
     ///
-    /// [`SatMap::last_map`] is `None` until the next successful step. Calibration, limits,
-    /// engine, satellite source and buffers are kept; nothing is allocated.
+    /// The satellite source is reset too ([`SatelliteSource::reset`]: a route pack's cursor
+    /// searches for the vehicle again). [`SatMap::last_map`] is `None` until the next successful
+    /// step. Calibration, limits, engine, satellite source and buffers are kept; nothing is
+    /// allocated.
     pub fn reset(&mut self) {
         self.last = None;
+        self.satellite.reset();
     }
 
     /// The limits frames are checked against.
