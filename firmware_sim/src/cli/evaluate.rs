@@ -1,21 +1,23 @@
-//! `satmap-sim evaluate`: Chamfer-AP of a predictions file against a ground-truth file, both in
-//! MapTR's results JSON layout (`eval::maptr_json`); prints the table and optionally writes the
-//! report as JSON.
+//! `satmap-sim evaluate`: Chamfer-AP of a predictions file against a ground-truth file, each in
+//! MapTR's own layout (`{"results": [...]}`, `{"GTs": [...]}`) or ours (`{"results": {token:
+//! ...}}`), told apart by content (`eval::maptr_files`); prints the table, optionally writes the
+//! report as JSON and both inputs as MapTR's files.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::eval::{EvalReport, evaluate_at, read_samples};
+use crate::eval::maptr_files::{MAPTR_GT_FILE, MAPTR_RESULTS_FILE};
+use crate::eval::{EvalReport, evaluate_at, read_file, write_maptr_pair};
 
 /// Arguments of `evaluate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Predictions: MapTR results JSON (with `confidence_level`).
+    /// Predictions: MapTR's `nuscmap_results.json`, or our layout (with `confidence_level`).
     #[arg(long)]
     pub predictions: PathBuf,
-    /// Ground truth: same layout, `confidence_level` optional (e.g. a scenario's
-    /// `ground_truth.json`).
+    /// Ground truth: MapTR's `{"GTs": [...]}` file, or our layout (e.g. a scenario's
+    /// `ground_truth.json`; `confidence_level` optional).
     #[arg(long)]
     pub gt: PathBuf,
     /// Chamfer thresholds, metres.
@@ -24,6 +26,10 @@ pub struct Args {
     /// Write the report here as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also write both inputs into this folder as MapTR's `nuscmap_results.json` and a
+    /// `{"GTs": [...]}` file `map_anns.json`, for MapTR's own evaluator.
+    #[arg(long)]
+    pub write_maptr: Option<PathBuf>,
 }
 
 /// Score and print.
@@ -31,13 +37,23 @@ pub struct Args {
 /// # Errors
 /// Unreadable or malformed input files, or the report cannot be written.
 pub fn run(args: &Args) -> Result<()> {
-    let predictions = read_samples(&args.predictions)?;
-    let gt = read_samples(&args.gt)?;
-    let report = evaluate_at(&predictions, &gt, &args.thresholds_m);
+    let predictions = read_file(&args.predictions)?;
+    let gt = read_file(&args.gt)?;
+    let report = evaluate_at(&predictions.samples, &gt.samples, &args.thresholds_m);
     print!("{}", format_report(&report));
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&report)?;
         std::fs::write(path, text).with_context(|| path.display().to_string())?;
+    }
+    if let Some(dir) = &args.write_maptr {
+        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+        write_maptr_pair(
+            &predictions.samples,
+            &gt.samples,
+            predictions.meta,
+            &dir.join(MAPTR_RESULTS_FILE),
+            &dir.join(MAPTR_GT_FILE),
+        )?;
     }
     Ok(())
 }

@@ -1,17 +1,30 @@
 //! Chamfer-AP over a set of samples: per-sample greedy matching and VOC "area" AP, exactly as
-//! `SATMAP_SPEC.md` "Metric" (MapTR protocol) says. Float64 throughout.
+//! `SATMAP_SPEC.md` "Metric" and MapTR's code (`map_utils/tpfp.py` `custom_tpfp_gen`,
+//! `map_utils/mean_ap.py` `eval_map` and `average_precision`) do it. Float64 throughout (MapTR
+//! stores each AP as float32; the two differ by float32 rounding only).
+//!
+//! Ties in score: MapTR orders predictions with `np.argsort(-scores)`, numpy's default
+//! (unstable) sort, so the order of equal scores depends on numpy's version and the machine's
+//! SIMD sort. Here both sorts (visiting order within a sample, ranking over all samples) are
+//! stable by descending score: equal scores keep input order, which is the order of the
+//! vectors in their sample and, across samples, the sample tokens in ascending byte order.
+//! That order can change AP (an FP ranked before a TP of the same score lowers it).
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
 
-use super::chamfer::{
-    RESAMPLE_POINTS, buffers_intersect, chamfer_distance_m, resample_by_arc_length,
-};
+use super::buffer::LineBuffer;
+use super::chamfer::{RESAMPLE_POINTS, chamfer_distance_m, resample_by_arc_length};
 use super::map_vector::{MapClass, MapVector};
 
 /// Chamfer thresholds of the protocol, metres.
 pub const DEFAULT_THRESHOLDS_M: [f64; 3] = [0.5, 1.0, 1.5];
+
+/// Distance given to a pair whose buffers do not intersect, metres: MapTR fills its score matrix
+/// with -100 and scores only intersecting pairs, so such a pair is unmatched at every threshold
+/// below 100 m (and, as in MapTR, matched above it).
+pub const NO_OVERLAP_DISTANCE_M: f64 = 100.0;
 
 /// Map elements of every sample, keyed by sample token (sorted, so results are deterministic).
 pub type SampleSet = BTreeMap<String, Vec<MapVector>>;
@@ -110,13 +123,15 @@ pub fn evaluate_at(
     }
 }
 
-/// A resampled element: its score and its 100 points.
+/// A resampled element: its score, its 100 points and their buffer.
 #[derive(Clone, Debug)]
 pub struct Resampled {
     /// Score of the element.
     pub score: f64,
     /// Points after arc-length resampling.
     pub points_m: Vec<[f64; 2]>,
+    /// Buffer of the resampled points (MapTR buffers the resampled line, not the input).
+    pub buffer: LineBuffer,
 }
 
 /// Elements of `class`, resampled; those with fewer than 2 points are skipped.
@@ -129,6 +144,7 @@ pub fn of_class(vectors: Option<&Vec<MapVector>>, class: MapClass) -> Vec<Resamp
                 .filter_map(|e| {
                     resample_by_arc_length(&e.points_m, RESAMPLE_POINTS).map(|points_m| Resampled {
                         score: e.score,
+                        buffer: LineBuffer::of_polyline(&points_m),
                         points_m,
                     })
                 })
@@ -137,8 +153,8 @@ pub fn of_class(vectors: Option<&Vec<MapVector>>, class: MapClass) -> Vec<Resamp
         .unwrap_or_default()
 }
 
-/// `distances[i][j]` = chamfer distance of prediction i to GT j, infinite when their 2 m
-/// buffers do not intersect (MapTR leaves those pairs unmatched).
+/// `distances[i][j]` = chamfer distance of prediction i to GT j, or [`NO_OVERLAP_DISTANCE_M`]
+/// when their buffers do not intersect (`eval::buffer`; a zero-length line intersects nothing).
 #[must_use]
 pub fn distance_matrix(preds: &[Resampled], gts: &[Resampled]) -> Vec<Vec<f64>> {
     preds
@@ -146,10 +162,10 @@ pub fn distance_matrix(preds: &[Resampled], gts: &[Resampled]) -> Vec<Vec<f64>> 
         .map(|p| {
             gts.iter()
                 .map(|g| {
-                    if buffers_intersect(&p.points_m, &g.points_m) {
+                    if p.buffer.intersects(&g.buffer) {
                         chamfer_distance_m(&p.points_m, &g.points_m)
                     } else {
-                        f64::INFINITY
+                        NO_OVERLAP_DISTANCE_M
                     }
                 })
                 .collect()
@@ -158,7 +174,8 @@ pub fn distance_matrix(preds: &[Resampled], gts: &[Resampled]) -> Vec<Vec<f64>> 
 }
 
 /// Greedy matching in one sample and class: each prediction's best GT is its nearest (first on
-/// ties); predictions are visited by descending score (stable); a prediction is TP when its
+/// ties, like numpy's `argmax`); predictions are visited by descending score, equal scores in
+/// input order (stable; see the module doc for MapTR's order); a prediction is TP when its
 /// distance is within `threshold_m` and its best GT is not yet taken, else FP (no fallback to a
 /// second-best GT). With no GT every prediction is FP. Output is in the input order.
 #[must_use]
@@ -196,7 +213,8 @@ pub fn match_sample(
     out
 }
 
-/// VOC "area" AP of scored matches pooled over samples: sort by score descending (stable),
+/// VOC "area" AP of scored matches pooled over samples: sort by score descending, equal scores
+/// in input order (stable),
 /// cumulative TP/FP, recall = tp / max(n_gt, eps), precision = tp / max(tp + fp, eps), pad
 /// recall [0, r, 1] and precision [0, p, 0], running max of precision from the right, and sum
 /// delta-recall * precision where recall changes.

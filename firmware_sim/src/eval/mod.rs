@@ -1,19 +1,26 @@
-//! The Chamfer-AP evaluator of `SATMAP_SPEC.md` ("Metric", MapTR protocol) and MapTR's results
-//! JSON layout.
+//! The Chamfer-AP evaluator of `SATMAP_SPEC.md` ("Metric"), following MapTR's evaluation code
+//! rule for rule, and the results files it reads and writes (MapTR's own and ours).
 //!
 //! - `map_vector`: the classed polyline shared with the synthetic ground truth and pictures.
-//! - `chamfer`: resampling to 100 points by arc length, the chamfer distance, the 2 m buffer
-//!   pre-filter.
-//! - `average_precision`: greedy matching per sample and class, VOC area AP, the report.
-//! - `maptr_json`: reading and writing `{"meta", "results": {token: {"vectors": [...]}}}`.
+//! - `chamfer`: resampling to 100 points by arc length, the chamfer distance.
+//! - `buffer`: MapTR's pre-test, 2 m buffers with flat caps and mitre joins (geo).
+//! - `average_precision`: greedy matching per sample and class, VOC area AP, the tie rule, the
+//!   report.
+//! - `maptr_json`: the vector record, our `{"results": {token: {"vectors": [...]}}}` layout, the
+//!   errors.
+//! - `maptr_files`: MapTR's `{"results": [...]}` and `{"GTs": [...]}` files; the reader of all
+//!   three layouts.
 
 pub mod average_precision;
+pub mod buffer;
 pub mod chamfer;
 pub mod map_vector;
+pub mod maptr_files;
 pub mod maptr_json;
 
 pub use average_precision::{
     ClassAp, DEFAULT_THRESHOLDS_M, EvalReport, SampleSet, evaluate, evaluate_at,
 };
 pub use map_vector::{MapClass, MapVector};
-pub use maptr_json::{ResultsFile, ResultsFileError, read_samples};
+pub use maptr_files::{Layout, LoadedFile, read_file, read_samples, write_maptr_pair};
+pub use maptr_json::{ResultsFile, ResultsFileError};
