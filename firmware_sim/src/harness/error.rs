@@ -1,0 +1,74 @@
+//! [`HarnessError`]: why a replay could not run, and the process exit codes the `drive`
+//! command maps it to.
+
+use std::path::PathBuf;
+
+use satmap_runtime::error::{InitError, StepError};
+
+/// Process exit code: the replay ran but a budget was exceeded.
+pub const EXIT_BUDGET_EXCEEDED: u8 = 4;
+/// Process exit code: bad input (bundle, scenario, route pack, arguments).
+pub const EXIT_BAD_INPUT: u8 = 2;
+
+/// Why a replay could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum HarnessError {
+    /// The bundle could not be opened or loaded.
+    #[error("bundle {path}: {message}")]
+    Bundle {
+        /// Bundle folder.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// A buffer of the model or the route pack does not fit its region of the memory map.
+    #[error(
+        "region `{region}` does not fit: needs {needed_bytes} bytes, memory_layout.toml gives \
+         {capacity_bytes}"
+    )]
+    RegionTooSmall {
+        /// Region name.
+        region: &'static str,
+        /// Bytes needed.
+        needed_bytes: usize,
+        /// Capacity, bytes.
+        capacity_bytes: usize,
+    },
+    /// The scenario could not be generated or read.
+    #[error("scenario: {0}")]
+    Scenario(String),
+    /// The route pack could not be built or parsed.
+    #[error("route pack: {0}")]
+    Pack(String),
+    /// The runtime refused to start.
+    #[error("runtime init: {0}")]
+    Init(InitError),
+    /// A step failed.
+    #[error("step {sequence}: {error}")]
+    Step {
+        /// Frame sequence.
+        sequence: u64,
+        /// The error.
+        error: StepError,
+    },
+    /// Bad settings.
+    #[error("settings: {0}")]
+    Settings(String),
+}
+
+impl From<InitError> for HarnessError {
+    fn from(e: InitError) -> Self {
+        match e {
+            InitError::RegionTooSmall {
+                region,
+                needed_bytes,
+                capacity_bytes,
+            } => Self::RegionTooSmall {
+                region,
+                needed_bytes,
+                capacity_bytes,
+            },
+            e => Self::Init(e),
+        }
+    }
+}

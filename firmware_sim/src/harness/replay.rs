@@ -1,0 +1,271 @@
+//! The replay loop: opens the bundle and the scenario (host side), loads the engine and the
+//! runtime inside the arena, steps every frame on the virtual clock, and records each step.
+
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use satmap_runtime::bundle::Bundle;
+use satmap_runtime::capacity::layout;
+use satmap_runtime::regions::check_regions;
+use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::frame::{CameraImage, Frame, FrameLimits};
+use satmap_runtime::geo::EnuFrame;
+use satmap_runtime::map_frame::MapFrame;
+use satmap_runtime::route_pack::{PackSource, RoutePack};
+use satmap_runtime::step::SatMap;
+use xxhash_rust::xxh3::Xxh3;
+
+use super::assemble::{ArenaSnapshots, Measured, assemble};
+use super::report::StepRecord;
+use super::source::open_scenario;
+use super::timed_engine::{Timed, TimedEngine, micros_since};
+use super::timed_source::TimedSource;
+use super::{HarnessError, LastStep, Replay, ReplayConfig, START_TIMESTAMP_US};
+use crate::arena::{ArenaAllocator, ArenaRegion, ArenaStats};
+use crate::eval::{MapClass, MapVector, SampleSet};
+use crate::synth::scenario::frame_dir_name;
+
+/// Slowest virtual clock a replay accepts, Hz.
+pub const MIN_RATE_HZ: f64 = 1e-3;
+/// Fastest virtual clock a replay accepts, Hz.
+pub const MAX_RATE_HZ: f64 = 1e4;
+
+fn stats_of(alloc: Option<&'static ArenaAllocator>) -> ArenaStats {
+    alloc.map(ArenaAllocator::stats).unwrap_or_default()
+}
+
+fn host<T>(alloc: Option<&'static ArenaAllocator>, f: impl FnOnce() -> T) -> T {
+    match alloc {
+        Some(a) => a.host_side(f),
+        None => f(),
+    }
+}
+
+fn label(alloc: Option<&'static ArenaAllocator>, region: ArenaRegion) {
+    if let Some(a) = alloc {
+        a.set_region(region);
+    }
+}
+
+fn to_vectors(map: &MapFrame) -> Vec<MapVector> {
+    map.elements
+        .iter()
+        .filter_map(|e| {
+            Some(MapVector {
+                class: MapClass::from_index(e.class as usize)?,
+                points_m: e
+                    .points_m
+                    .iter()
+                    .map(|p| [f64::from(p.x), f64::from(p.y)])
+                    .collect(),
+                score: f64::from(e.score),
+            })
+        })
+        .collect()
+}
+
+/// Run a replay. `alloc` is the global allocator when the process runs in the arena (already
+/// initialised by the caller); `None` runs without arena figures.
+///
+/// # Errors
+/// Bad bundle, scenario or pack, a region that does not fit, or a failed step.
+pub fn replay(
+    cfg: &ReplayConfig,
+    alloc: Option<&'static ArenaAllocator>,
+) -> Result<Replay, HarnessError> {
+    // 1 mHz .. 10 kHz keeps every virtual timestamp (start + frames * period) far from u64
+    // overflow for any frame count the harness can hold.
+    if !(cfg.rate_hz >= MIN_RATE_HZ && cfg.rate_hz <= MAX_RATE_HZ) || cfg.frames == 0 {
+        return Err(HarnessError::Settings(format!(
+            "rate must be in [{MIN_RATE_HZ}, {MAX_RATE_HZ}] Hz (got {}) and frames at least 1",
+            cfg.rate_hz
+        )));
+    }
+    let period_us = (1e6 / cfg.rate_hz).round() as u64;
+    // Host side: the bundle manifest, the scenario, the route pack (flash on the vehicle).
+    let (bundle, source, anchor, pack_bytes) = host(alloc, || -> Result<_, HarnessError> {
+        let bundle = Bundle::open(&cfg.bundle_dir).map_err(|e| HarnessError::Bundle {
+            path: cfg.bundle_dir.clone(),
+            message: e.to_string(),
+        })?;
+        // Refuse a model that does not fit the memory map before loading anything.
+        check_regions(bundle.dims())?;
+        let d = bundle.dims();
+        let (source, anchor, pack_bytes) = open_scenario(cfg, d.image_w, d.image_h)?;
+        if pack_bytes.len() > layout::ROUTE_PACK_BYTES {
+            return Err(HarnessError::RegionTooSmall {
+                region: "route_pack",
+                needed_bytes: pack_bytes.len(),
+                capacity_bytes: layout::ROUTE_PACK_BYTES,
+            });
+        }
+        Ok((bundle, source, anchor, pack_bytes))
+    })?;
+    let frames = cfg.frames.min(source.len());
+    let dims = bundle.dims().clone();
+    let world = EnuFrame::new(anchor);
+    let pack = RoutePack::parse(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?;
+
+    // ECU side: the graph engine, then the runtime's regions.
+    let before_engine = stats_of(alloc);
+    label(alloc, ArenaRegion::GraphEngine);
+    let engine = TractEngine::load(&bundle).map_err(|e| HarnessError::Bundle {
+        path: cfg.bundle_dir.clone(),
+        message: e.to_string(),
+    })?;
+    let engine = TimedEngine::new(engine, frames, alloc);
+    let after_engine = stats_of(alloc);
+    label(alloc, ArenaRegion::RuntimeRegions);
+    let satellite = TimedSource::new(
+        PackSource::from_bytes(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?,
+        frames,
+    );
+    // The virtual clock sets the timestamps: a slow replay must not look like an outage.
+    let limits = FrameLimits {
+        max_timestamp_gap_us: FrameLimits::DEFAULT
+            .max_timestamp_gap_us
+            .max(period_us.saturating_mul(2)),
+        ..FrameLimits::DEFAULT
+    };
+    let mut satmap = SatMap::with_limits(engine, source.calibration(), satellite, limits)?;
+    let after_init = stats_of(alloc);
+
+    // Host-side buffers, reserved before the loop.
+    let (mut images, mut steps, mut predictions, mut truth, mut features, progress) =
+        host(alloc, || {
+            let progress = if cfg.show_progress && frames > 1 {
+                ProgressBar::new(frames as u64)
+            } else {
+                ProgressBar::hidden()
+            };
+            if let Ok(style) = ProgressStyle::with_template(
+                "{msg} [{bar:40}] {pos}/{len} steps, {elapsed} (eta {eta})",
+            ) {
+                progress.set_style(style);
+            }
+            progress.set_message("replay");
+            (
+                vec![0u8; 6 * dims.image_bytes()],
+                Vec::<StepRecord>::with_capacity(frames),
+                SampleSet::new(),
+                SampleSet::new(),
+                Vec::<geojson::Feature>::new(),
+                progress,
+            )
+        });
+    let mut digest = Xxh3::new();
+    let mut last = None;
+    for k in 0..frames {
+        let sensor = host(alloc, || source.frame(k, &mut images))?;
+        let compass_deg = 90.0 - sensor.world_pose.yaw_rad.to_degrees();
+        let p = sensor.world_pose.position_m;
+        let fix = world.enu_to_geodetic(glam::DVec3::new(p.x, p.y, 0.0));
+        let pose = pack.pose_from_wgs84(&fix, compass_deg);
+        let image_bytes = dims.image_bytes();
+        let frame = Frame {
+            sequence: k as u64 + 1,
+            timestamp_us: START_TIMESTAMP_US + k as u64 * period_us,
+            pose,
+            motion: sensor.motion,
+            images: core::array::from_fn(|c| {
+                Some(CameraImage {
+                    width_px: dims.image_w as u32,
+                    height_px: dims.image_h as u32,
+                    rgb: &images[c * image_bytes..(c + 1) * image_bytes],
+                })
+            }),
+        };
+
+        label(alloc, ArenaRegion::Step);
+        let before = stats_of(alloc);
+        let t = Instant::now();
+        let result = satmap.step(&frame).map(|m| (m.digest, m.health.degraded));
+        let latency_us = micros_since(t);
+        let after = stats_of(alloc);
+        let (map_digest, degraded) = result.map_err(|error| HarnessError::Step {
+            sequence: frame.sequence,
+            error,
+        })?;
+        let engine_allocations = satmap.engine_mut().timings_mut().take_engine_allocations();
+        satmap
+            .engine_mut()
+            .timings_mut()
+            .record(Timed::Step, latency_us);
+        let deadline_miss = latency_us > period_us;
+        if deadline_miss {
+            satmap.mark_deadline_overrun();
+        }
+        digest.update(&map_digest.to_le_bytes());
+        steps.push(StepRecord {
+            sequence: frame.sequence,
+            timestamp_us: frame.timestamp_us,
+            latency_us,
+            digest: map_digest,
+            engine_allocations,
+            outside_engine_allocations: (after.allocations - before.allocations)
+                .saturating_sub(engine_allocations),
+            arena_peak_bytes: after.peak_bytes,
+            arena_current_bytes: after.current_bytes,
+            deadline_miss,
+            degraded,
+        });
+
+        host(alloc, || {
+            let name = frame_dir_name(k);
+            if let Some(map) = satmap.last_map() {
+                let preds = to_vectors(map);
+                features.extend(crate::render::frame_features(
+                    &sensor.world_pose,
+                    &preds,
+                    k as u32,
+                ));
+                if k + 1 == frames {
+                    last = Some(LastStep {
+                        crop_rgb: satmap.crop().to_vec(),
+                        crop_spec: dims.crop_spec(),
+                        images: images.clone(),
+                        image_w_px: dims.image_w,
+                        image_h_px: dims.image_h,
+                        predictions: preds.clone(),
+                        ground_truth: sensor.ground_truth.clone(),
+                    });
+                }
+                predictions.insert(name.clone(), preds);
+            }
+            truth.insert(name, sensor.ground_truth);
+            progress.inc(1);
+        });
+    }
+    label(alloc, ArenaRegion::Unlabelled);
+    let end = stats_of(alloc);
+
+    let report = host(alloc, || {
+        progress.finish_and_clear();
+        let crop_series = &satmap.satellite_mut().crop_us;
+        let crop_latency = crop_series.percentiles();
+        let crop_samples_us = crop_series.samples_us().to_vec();
+        assemble(Measured {
+            cfg,
+            frames,
+            period_us,
+            crop_latency,
+            crop_samples_us,
+            timings: satmap.engine_mut().timings(),
+            predictions: &predictions,
+            truth: &truth,
+            arena: ArenaSnapshots {
+                before_engine,
+                after_engine,
+                after_init,
+                end,
+            },
+            run_digest: digest.digest(),
+            steps: std::mem::take(&mut steps),
+        })
+    });
+    Ok(Replay {
+        report,
+        last,
+        features,
+    })
+}
