@@ -17,6 +17,7 @@ fn config(rate_hz: f64, frames: usize) -> ReplayConfig {
         frames,
         rate_hz,
         show_progress: false,
+        max_degraded_share: satmap_sim::harness::DEFAULT_MAX_DEGRADED_SHARE,
     }
 }
 
@@ -41,4 +42,20 @@ fn a_replay_slower_than_the_default_timestamp_gap_steps_every_frame() {
     assert_eq!(report.steps.len(), 2);
     let sequences: Vec<u64> = report.steps.iter().map(|s| s.sequence).collect();
     assert_eq!(sequences, [1, 2]);
+}
+
+#[test]
+fn frame_counts_and_degraded_shares_out_of_range_are_refused_before_any_work() {
+    let refused = |cfg: &ReplayConfig, what: &str| match replay(cfg, None) {
+        Err(HarnessError::Settings(m)) => assert!(m.contains(what), "{m}"),
+        other => panic!("{cfg:?}: {other:?}"),
+    };
+    refused(&config(1.0, satmap_sim::harness::MAX_FRAMES + 1), "frames");
+    for share in [-0.01, 1.01, f64::NAN] {
+        let cfg = ReplayConfig {
+            max_degraded_share: share,
+            ..config(1.0, 2)
+        };
+        refused(&cfg, "degraded share");
+    }
 }

@@ -16,6 +16,7 @@ fn config(seed: u64) -> ReplayConfig {
         frames: 3,
         rate_hz: 1.0,
         show_progress: false,
+        max_degraded_share: satmap_sim::harness::DEFAULT_MAX_DEGRADED_SHARE,
     }
 }
 

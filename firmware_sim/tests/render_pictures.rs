@@ -92,3 +92,30 @@ fn geojson_moves_points_into_the_route_frame() {
     );
     assert_eq!(json["features"][0]["properties"]["sequence"], 4);
 }
+
+#[test]
+fn the_world_raster_samples_outside_colour_far_away_instead_of_overflowing() {
+    use satmap_sim::synth::ground_raster::GroundRaster;
+    let raster = GroundRaster {
+        x_min_m: 0.0,
+        y_max_m: 4.0,
+        gsd_m: 1.0,
+        width_px: 4,
+        height_px: 4,
+        rgb: vec![200; 4 * 4 * 3],
+        outside: [1, 2, 3],
+    };
+    assert_eq!(raster.sample_bilinear(1.5, 2.5), [200.0; 3]);
+    // 1e308 m is infinite in f32: the pixel index saturated to usize::MAX and `+ 1` overflowed.
+    for (x_m, y_m) in [
+        (1e308_f64 as f32, 2.0),
+        (1.0, -1e308_f64 as f32),
+        (f32::NAN, 1.0),
+    ] {
+        assert_eq!(
+            raster.sample_bilinear(x_m, y_m),
+            [1.0, 2.0, 3.0],
+            "{x_m} {y_m}"
+        );
+    }
+}

@@ -2,11 +2,14 @@
 //! its satellite imagery packed into a route pack) or a scenario folder through `SatMap` with
 //! the tract engine, at a fixed rate on a virtual clock, inside the fixed arena of
 //! `memory_layout.toml`, and reports latency per stage against the budgets, the arena peak,
-//! allocations per step and the run digest.
+//! allocations per step, the steps that ran degraded (per reason) and the run digest.
 //!
-//! Exit codes: 0 all budgets met; [`EXIT_BUDGET_EXCEEDED`] a budget was exceeded;
-//! [`crate::arena::EXIT_ARENA_EXHAUSTED`] the arena ran out (the region is named on stderr);
-//! [`EXIT_BAD_INPUT`] bad bundle, scenario, route pack or arguments; 1 a failed step.
+//! Exit codes: 0 all budgets met and at most the stated share of steps degraded;
+//! [`EXIT_BUDGET_EXCEEDED`] (4) a budget was exceeded; [`EXIT_DEGRADED`] (5) more than
+//! `--max-degraded-share` of the steps ran without the satellite prior (the reasons are named on
+//! stderr; this wins over 4, since a degraded run's latencies are not the full pipeline's);
+//! [`crate::arena::EXIT_ARENA_EXHAUSTED`] (3) the arena ran out (the region is named on stderr);
+//! [`EXIT_BAD_INPUT`] (2) bad bundle, scenario, route pack or arguments; 1 a failed step.
 
 use std::path::{Path, PathBuf};
 
@@ -15,7 +18,8 @@ use satmap_runtime::capacity::layout;
 
 use crate::arena::ArenaAllocator;
 use crate::harness::{
-    EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, HarnessError, ReplayConfig, ScenarioInput, replay,
+    DEFAULT_MAX_DEGRADED_SHARE, EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError,
+    MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, ReplayConfig, ScenarioInput, replay,
 };
 use crate::render::{camera_sheet, render_frame, route_frame_geojson};
 
@@ -46,6 +50,10 @@ pub struct Args {
     /// Arena size, bytes (default and maximum: `[arena] bytes` of memory_layout.toml).
     #[arg(long)]
     pub arena_bytes: Option<usize>,
+    /// Largest share of steps (0..=1) that may run without the satellite prior; more exits
+    /// with code 5.
+    #[arg(long, default_value_t = DEFAULT_MAX_DEGRADED_SHARE)]
+    pub max_degraded_share: f64,
     /// Print the report as JSON instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -62,6 +70,11 @@ pub struct Args {
 #[error("budget exceeded: {0}")]
 pub struct BudgetExceeded(pub String);
 
+/// The replay ran and more than the stated share of steps ran degraded (the report says why).
+#[derive(Debug, thiserror::Error)]
+#[error("degraded run: {0}")]
+pub struct DegradedRun(pub String);
+
 /// Bad command-line input.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -70,11 +83,20 @@ pub struct BadArgument(pub String);
 /// Process exit code for an error returned by a subcommand.
 #[must_use]
 pub fn exit_code(e: &anyhow::Error) -> u8 {
+    if e.downcast_ref::<DegradedRun>().is_some() {
+        return EXIT_DEGRADED;
+    }
     if e.downcast_ref::<BudgetExceeded>().is_some() {
         return EXIT_BUDGET_EXCEEDED;
     }
     if e.downcast_ref::<BadArgument>().is_some() {
         return EXIT_BAD_INPUT;
+    }
+    if let Some(r) = e.downcast_ref::<crate::cli::render::RenderError>() {
+        return if r.is_bad_input() { EXIT_BAD_INPUT } else { 1 };
+    }
+    if let Some(c) = e.downcast_ref::<crate::cli::check_bundle::CheckError>() {
+        return if c.is_bad_input() { EXIT_BAD_INPUT } else { 1 };
     }
     match e.downcast_ref::<HarnessError>() {
         Some(HarnessError::Step { .. } | HarnessError::Init(_)) | None => 1,
@@ -92,15 +114,7 @@ pub fn run(
     alloc: &'static ArenaAllocator,
     init: &dyn Fn(usize) -> bool,
 ) -> Result<()> {
-    let arena_bytes = args.arena_bytes.unwrap_or(layout::ARENA_BYTES);
-    if arena_bytes == 0 || arena_bytes > layout::ARENA_BYTES {
-        return Err(BadArgument(format!(
-            "--arena-bytes {arena_bytes} must be in 1..={} (the static arena of memory_layout.toml)",
-            layout::ARENA_BYTES
-        ))
-        .into());
-    }
-    let rate_hz = args.rate_hz.unwrap_or(1e6 / layout::STEP_PERIOD_US as f64);
+    let (arena_bytes, rate_hz) = check_args(args)?;
     let cfg = ReplayConfig {
         bundle_dir: args.bundle.clone(),
         scenario: match &args.scenario {
@@ -114,6 +128,7 @@ pub fn run(
         frames: args.frames,
         rate_hz,
         show_progress: !args.quiet && !args.json,
+        max_degraded_share: args.max_degraded_share,
     };
     if !init(arena_bytes) {
         return Err(BadArgument("the arena was already initialised".into()).into());
@@ -129,12 +144,72 @@ pub fn run(
         if let Some(out) = &args.out {
             write_outputs(out, &outcome)?;
         }
-        if report.within_budgets() {
-            Ok(())
-        } else {
-            Err(BudgetExceeded(report.exceeded.join("; ")).into())
+        match (report.degraded_verdict(), report.within_budgets()) {
+            (None, true) => Ok(()),
+            (None, false) => Err(BudgetExceeded(report.exceeded.join("; ")).into()),
+            (Some(why), true) => Err(DegradedRun(why).into()),
+            (Some(why), false) => Err(DegradedRun(format!(
+                "{why}; budget also exceeded: {}",
+                report.exceeded.join("; ")
+            ))
+            .into()),
         }
     })
+}
+
+/// Slowest sampling rate of a synthetic drive, Hz (below it the frames are kilometres apart).
+pub const MIN_DRIVE_HZ: f64 = 0.01;
+/// Fastest sampling rate of a synthetic drive, Hz (a camera rig's rate, several times over).
+pub const MAX_DRIVE_HZ: f64 = 100.0;
+/// Fastest mean speed of a synthetic drive, m/s (exclusive; the generator's bound).
+pub const MAX_SPEED_MPS: f64 = 60.0;
+
+/// Check every numeric argument before any work; returns the arena size and the clock rate.
+/// Values are echoed with `{:?}` so that `1e-300` prints as written, not as 300 digits.
+///
+/// # Errors
+/// [`BadArgument`] naming the first argument out of range.
+pub fn check_args(args: &Args) -> Result<(usize, f64), BadArgument> {
+    let bad = |m: String| Err(BadArgument(m));
+    let arena_bytes = args.arena_bytes.unwrap_or(layout::ARENA_BYTES);
+    if arena_bytes == 0 || arena_bytes > layout::ARENA_BYTES {
+        return bad(format!(
+            "--arena-bytes {arena_bytes} must be in 1..={} (the static arena of memory_layout.toml)",
+            layout::ARENA_BYTES
+        ));
+    }
+    if !(1..=MAX_FRAMES).contains(&args.frames) {
+        return bad(format!(
+            "--frames {} must be in 1..={MAX_FRAMES}",
+            args.frames
+        ));
+    }
+    // `contains` is false for NaN, so every range check below also refuses non-finite values.
+    if !(0.0..MAX_SPEED_MPS).contains(&args.speed_mps) {
+        return bad(format!(
+            "--speed-mps {:?} must be in [0, {MAX_SPEED_MPS}) m/s",
+            args.speed_mps
+        ));
+    }
+    if !(MIN_DRIVE_HZ..=MAX_DRIVE_HZ).contains(&args.drive_hz) {
+        return bad(format!(
+            "--drive-hz {:?} must be in [{MIN_DRIVE_HZ}, {MAX_DRIVE_HZ}] Hz",
+            args.drive_hz
+        ));
+    }
+    let rate_hz = args.rate_hz.unwrap_or(1e6 / layout::STEP_PERIOD_US as f64);
+    if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz) {
+        return bad(format!(
+            "--rate-hz {rate_hz:?} must be in [{MIN_RATE_HZ}, {MAX_RATE_HZ}] Hz"
+        ));
+    }
+    if !(0.0..=1.0).contains(&args.max_degraded_share) {
+        return bad(format!(
+            "--max-degraded-share {:?} must be in [0, 1]",
+            args.max_degraded_share
+        ));
+    }
+    Ok((arena_bytes, rate_hz))
 }
 
 fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {

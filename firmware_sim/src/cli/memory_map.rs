@@ -32,10 +32,14 @@ pub fn run(args: &Args) -> Result<()> {
         Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
         None => BUILT_IN_LAYOUT.to_owned(),
     };
-    let layout = MemoryLayout::parse(&text)?;
+    let layout = MemoryLayout::parse(&text).with_context(|| match &args.layout {
+        Some(p) => p.display().to_string(),
+        None => "built-in memory_layout.toml".to_owned(),
+    })?;
     print!("{}", layout.render_map());
     if let Some(dir) = &args.bundle {
-        let bundle = Bundle::open(dir).with_context(|| dir.display().to_string())?;
+        // Bundle errors name the file that failed; a context would print the folder twice.
+        let bundle = Bundle::open(dir)?;
         check_regions(bundle.dims())
             .map_err(crate::harness::HarnessError::from)
             .with_context(|| format!("bundle {}", dir.display()))?;

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use satmap_runtime::capacity::layout;
 
+use super::degraded::DegradedReport;
 use super::report::{AllocationReport, ArenaReport, MapQuality, Report, StageReport, StepRecord};
 use super::stats::Percentiles;
 use super::timed_engine::{Timed, Timings};
@@ -22,6 +23,8 @@ pub(super) struct ArenaSnapshots {
     pub(super) after_init: ArenaStats,
     /// After the last step.
     pub(super) end: ArenaStats,
+    /// Peak since start-up (the harness restarts the arena's own peak before each step).
+    pub(super) peak_bytes: usize,
 }
 
 /// Everything a replay measured, by reference, for [`assemble`].
@@ -112,7 +115,7 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
         stage_budget_misses: 0,
         arena: ArenaReport {
             capacity_bytes: a.end.capacity_bytes,
-            peak_bytes: a.end.peak_bytes,
+            peak_bytes: a.peak_bytes,
             peak_budget_bytes: layout::PEAK_BUDGET_BYTES,
             graph_engine_bytes: a.after_engine.current_bytes - a.before_engine.current_bytes,
             runtime_regions_bytes: a.after_init.current_bytes - a.after_engine.current_bytes,
@@ -124,6 +127,7 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             outside_engine_max_per_step: 0,
             peak_growth_bytes: 0,
         },
+        degraded: DegradedReport::count(core::iter::empty(), m.cfg.max_degraded_share),
         run_digest: format!("{:016x}", m.run_digest),
         map_quality,
         exceeded: Vec::new(),

@@ -9,6 +9,9 @@ use satmap_runtime::error::{InitError, StepError};
 pub const EXIT_BUDGET_EXCEEDED: u8 = 4;
 /// Process exit code: bad input (bundle, scenario, route pack, arguments).
 pub const EXIT_BAD_INPUT: u8 = 2;
+/// Process exit code: the replay ran but more than the stated share of steps ran without the
+/// satellite prior (the report names the reasons).
+pub const EXIT_DEGRADED: u8 = 5;
 
 /// Why a replay could not run.
 #[derive(Debug, thiserror::Error)]

@@ -15,6 +15,7 @@
 //! - [`world_imagery`]: a synthetic world's satellite raster as imagery for the route-pack
 //!   builder.
 //! - [`report`]: the report, its verdicts, text and JSON.
+//! - [`degraded`]: why a step ran without the satellite prior; counts and shares per reason.
 //!
 //! What runs where: the ECU side (graph engine, runtime buffers, each step) allocates from the
 //! arena; the host side (generating the world, rendering sensor frames, ground truth, building
@@ -24,6 +25,7 @@
 //! is a deadline miss and the map is flagged with `mark_deadline_overrun`.
 
 mod assemble;
+pub mod degraded;
 pub mod error;
 mod replay;
 pub mod report;
@@ -38,8 +40,9 @@ use std::path::PathBuf;
 use satmap_runtime::satellite::CropSpec;
 
 pub use assemble::{bundle_config_name, layout_runtime_bytes};
-pub use error::{EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, HarnessError};
-pub use replay::{MAX_RATE_HZ, MIN_RATE_HZ, replay};
+pub use degraded::DEFAULT_MAX_DEGRADED_SHARE;
+pub use error::{EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError};
+pub use replay::{MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, replay};
 
 use crate::eval::MapVector;
 use report::Report;
@@ -75,6 +78,9 @@ pub struct ReplayConfig {
     pub frames: usize,
     /// Virtual clock rate, Hz.
     pub rate_hz: f64,
+    /// Largest share of steps (`0..=1`) that may run without the satellite prior before the
+    /// report calls the run degraded ([`DEFAULT_MAX_DEGRADED_SHARE`] unless stated).
+    pub max_degraded_share: f64,
     /// Draw a progress bar on stderr.
     pub show_progress: bool,
 }

@@ -6,16 +6,17 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use satmap_runtime::bundle::Bundle;
 use satmap_runtime::capacity::layout;
-use satmap_runtime::regions::check_regions;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::frame::{CameraImage, Frame, FrameLimits};
 use satmap_runtime::geo::EnuFrame;
 use satmap_runtime::map_frame::MapFrame;
+use satmap_runtime::regions::check_regions;
 use satmap_runtime::route_pack::{PackSource, RoutePack};
 use satmap_runtime::step::SatMap;
 use xxhash_rust::xxh3::Xxh3;
 
 use super::assemble::{ArenaSnapshots, Measured, assemble};
+use super::degraded::DegradedReason;
 use super::report::StepRecord;
 use super::source::open_scenario;
 use super::timed_engine::{Timed, TimedEngine, micros_since};
@@ -29,6 +30,10 @@ use crate::synth::scenario::frame_dir_name;
 pub const MIN_RATE_HZ: f64 = 1e-3;
 /// Fastest virtual clock a replay accepts, Hz.
 pub const MAX_RATE_HZ: f64 = 1e4;
+/// Most steps one replay runs: every per-step series is reserved up front (some in the arena),
+/// so the count must stay far below what would exhaust memory; 100 000 steps is 14 hours of
+/// drive at 2 Hz.
+pub const MAX_FRAMES: usize = 100_000;
 
 fn stats_of(alloc: Option<&'static ArenaAllocator>) -> ArenaStats {
     alloc.map(ArenaAllocator::stats).unwrap_or_default()
@@ -75,10 +80,23 @@ pub fn replay(
 ) -> Result<Replay, HarnessError> {
     // 1 mHz .. 10 kHz keeps every virtual timestamp (start + frames * period) far from u64
     // overflow for any frame count the harness can hold.
-    if !(cfg.rate_hz >= MIN_RATE_HZ && cfg.rate_hz <= MAX_RATE_HZ) || cfg.frames == 0 {
+    if !(cfg.rate_hz >= MIN_RATE_HZ && cfg.rate_hz <= MAX_RATE_HZ) {
         return Err(HarnessError::Settings(format!(
-            "rate must be in [{MIN_RATE_HZ}, {MAX_RATE_HZ}] Hz (got {}) and frames at least 1",
+            "rate must be in [{MIN_RATE_HZ}, {MAX_RATE_HZ}] Hz (got {})",
             cfg.rate_hz
+        )));
+    }
+    if !(1..=MAX_FRAMES).contains(&cfg.frames) {
+        return Err(HarnessError::Settings(format!(
+            "frames must be in 1..={MAX_FRAMES} (got {})",
+            cfg.frames
+        )));
+    }
+    // A NaN share would compare false and never call a run degraded.
+    if !(0.0..=1.0).contains(&cfg.max_degraded_share) {
+        return Err(HarnessError::Settings(format!(
+            "the max degraded share must be in [0, 1] (got {})",
+            cfg.max_degraded_share
         )));
     }
     let period_us = (1e6 / cfg.rate_hz).round() as u64;
@@ -154,6 +172,8 @@ pub fn replay(
             )
         });
     let mut digest = Xxh3::new();
+    // Arena peak since start-up, carried across the per-step peak restarts.
+    let mut peak_bytes = 0;
     let mut last = None;
     for k in 0..frames {
         let sensor = host(alloc, || source.frame(k, &mut images))?;
@@ -178,14 +198,23 @@ pub fn replay(
 
         label(alloc, ArenaRegion::Step);
         let before = stats_of(alloc);
+        // Restart the peak so that this step's own peak is measured, not the start-up one
+        // (loading the engine peaks far above any step); the start-up peak is kept here.
+        peak_bytes = peak_bytes.max(before.peak_bytes);
+        if let Some(a) = alloc {
+            a.reset_peak();
+        }
         let t = Instant::now();
-        let result = satmap.step(&frame).map(|m| (m.digest, m.health.degraded));
+        let result = satmap.step(&frame).map(|m| (m.digest, m.health));
         let latency_us = micros_since(t);
         let after = stats_of(alloc);
-        let (map_digest, degraded) = result.map_err(|error| HarnessError::Step {
+        peak_bytes = peak_bytes.max(after.peak_bytes);
+        let (map_digest, health) = result.map_err(|error| HarnessError::Step {
             sequence: frame.sequence,
             error,
         })?;
+        let fault = satmap.satellite_mut().inner().last_report().fault;
+        let degraded_reason = DegradedReason::of(&health, fault);
         let engine_allocations = satmap.engine_mut().timings_mut().take_engine_allocations();
         satmap
             .engine_mut()
@@ -204,10 +233,12 @@ pub fn replay(
             engine_allocations,
             outside_engine_allocations: (after.allocations - before.allocations)
                 .saturating_sub(engine_allocations),
-            arena_peak_bytes: after.peak_bytes,
+            arena_peak_bytes: peak_bytes,
+            step_peak_bytes: after.peak_bytes,
             arena_current_bytes: after.current_bytes,
             deadline_miss,
-            degraded,
+            degraded: health.degraded,
+            degraded_reason,
         });
 
         host(alloc, || {
@@ -258,6 +289,7 @@ pub fn replay(
                 after_engine,
                 after_init,
                 end,
+                peak_bytes: peak_bytes.max(end.peak_bytes),
             },
             run_digest: digest.digest(),
             steps: std::mem::take(&mut steps),

@@ -1,15 +1,18 @@
 //! The replay report: per-stage and per-step latency percentiles against their budgets,
-//! deadline misses, arena peak against its budget, allocations per step after warm-up, the run
-//! digest and the map quality; as a text table and as JSON (serde).
+//! deadline misses, arena peak against its budget, allocations and arena peak growth per step
+//! after warm-up, the degraded steps per reason against the stated share, the run digest and the
+//! map quality; as a text table and as JSON (serde).
 
 use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::degraded::{DegradedReason, DegradedReport};
 use super::stats::Percentiles;
 
 /// Steps excluded from the allocation and peak checks: the graph engine sizes its scratch
-/// buffers on the first runs.
+/// buffers on the first runs. The peak of the last of them is the reference later steps' peaks
+/// are judged against.
 pub const WARMUP_STEPS: usize = 2;
 
 /// One timed quantity.
@@ -43,12 +46,17 @@ pub struct StepRecord {
     pub outside_engine_allocations: usize,
     /// Arena peak since start-up, after this step, bytes.
     pub arena_peak_bytes: usize,
+    /// Arena peak during this step alone, bytes (the harness restarts the peak before each
+    /// step, so a step's scratch shows even below the start-up peak).
+    pub step_peak_bytes: usize,
     /// Arena bytes in use after this step.
     pub arena_current_bytes: usize,
     /// The step took longer than the step period.
     pub deadline_miss: bool,
     /// The satellite prior was missing or corrupt (camera-only map).
     pub degraded: bool,
+    /// Why, when degraded.
+    pub degraded_reason: Option<DegradedReason>,
 }
 
 /// Arena figures.
@@ -77,7 +85,8 @@ pub struct AllocationReport {
     pub engine_max_per_step: usize,
     /// Largest number of allocations outside the graph engine in one step.
     pub outside_engine_max_per_step: usize,
-    /// Arena peak grew after warm-up (bytes of growth).
+    /// Largest growth of a step's own arena peak ([`StepRecord::step_peak_bytes`]) over the
+    /// last warm-up step's, bytes (0: the steady state allocates no more than warm-up did).
     pub peak_growth_bytes: usize,
 }
 
@@ -119,6 +128,8 @@ pub struct Report {
     pub arena: ArenaReport,
     /// Allocations after warm-up.
     pub allocations: AllocationReport,
+    /// Steps that ran without the satellite prior, per reason, against the stated share.
+    pub degraded: DegradedReport,
     /// xxh3-64 of all step digests in order, hex.
     pub run_digest: String,
     /// Map quality (synthetic ground truth).
@@ -130,13 +141,14 @@ pub struct Report {
 }
 
 impl Report {
-    /// Fill the verdicts (`allocations`, misses, `exceeded`) from the steps and stages.
+    /// Fill the verdicts (`allocations`, misses, `degraded`, `exceeded`) from the steps and
+    /// stages; `degraded.max_share` is kept.
     pub fn judge(&mut self) {
         let after = self.steps.get(WARMUP_STEPS..).unwrap_or(&[]);
         let warm_peak = self
             .steps
             .get(WARMUP_STEPS.saturating_sub(1))
-            .map_or(0, |s| s.arena_peak_bytes);
+            .map_or(0, |s| s.step_peak_bytes);
         self.allocations = AllocationReport {
             steps: after.len(),
             engine_max_per_step: after
@@ -151,10 +163,14 @@ impl Report {
                 .unwrap_or(0),
             peak_growth_bytes: after
                 .iter()
-                .map(|s| s.arena_peak_bytes.saturating_sub(warm_peak))
+                .map(|s| s.step_peak_bytes.saturating_sub(warm_peak))
                 .max()
                 .unwrap_or(0),
         };
+        self.degraded = DegradedReport::count(
+            self.steps.iter().map(|s| s.degraded_reason),
+            self.degraded.max_share,
+        );
         self.deadline_misses = self.steps.iter().filter(|s| s.deadline_miss).count();
         self.stage_budget_misses = self
             .stages
@@ -185,6 +201,12 @@ impl Report {
                 ));
             }
         }
+        if self.allocations.peak_growth_bytes > 0 {
+            exceeded.push(format!(
+                "the arena peak of a step grew by {} bytes over the last warm-up step's",
+                self.allocations.peak_growth_bytes
+            ));
+        }
         if self.allocations.outside_engine_max_per_step > 0 {
             exceeded.push(format!(
                 "the runtime allocated outside the graph engine after warm-up (up to {} per step)",
@@ -198,6 +220,24 @@ impl Report {
     #[must_use]
     pub fn within_budgets(&self) -> bool {
         self.exceeded.is_empty()
+    }
+
+    /// When more than the stated share of steps ran degraded: how many, of how many, and why.
+    #[must_use]
+    pub fn degraded_verdict(&self) -> Option<String> {
+        let d = &self.degraded;
+        d.over_limit.then(|| {
+            format!(
+                "{} of {} steps ({:.1}%) ran without the satellite prior, more than the stated \
+                 {:.1}% (--max-degraded-share {}): {}",
+                d.steps,
+                self.steps.len(),
+                100.0 * d.share,
+                100.0 * d.max_share,
+                d.max_share,
+                d.reasons_text()
+            )
+        })
     }
 
     /// The human-readable table.
@@ -277,6 +317,20 @@ impl Report {
              engine max {}, inside max {}; arena peak growth {} bytes",
             al.steps, al.outside_engine_max_per_step, al.engine_max_per_step, al.peak_growth_bytes
         );
+        let d = &self.degraded;
+        let _ = write!(
+            s,
+            "degraded steps     {} of {} ({:.1}%; stated limit {:.1}%)",
+            d.steps,
+            self.steps.len(),
+            100.0 * d.share,
+            100.0 * d.max_share
+        );
+        if d.by_reason.is_empty() {
+            let _ = writeln!(s);
+        } else {
+            let _ = writeln!(s, ": {}", d.reasons_text());
+        }
         let _ = writeln!(s, "run digest         {}", self.run_digest);
         if let Some(q) = &self.map_quality {
             let classes: Vec<String> = q
@@ -299,6 +353,10 @@ impl Report {
             for e in &self.exceeded {
                 let _ = writeln!(s, "  - {e}");
             }
+        }
+        if let Some(why) = self.degraded_verdict() {
+            let _ = writeln!(s, "verdict            DEGRADED RUN");
+            let _ = writeln!(s, "  - {why}");
         }
         s
     }

@@ -24,6 +24,11 @@ impl<S: SatelliteSource> TimedSource<S> {
             crop_us: Series::with_capacity(steps),
         }
     }
+
+    /// The wrapped source (e.g. to read its crop report).
+    pub const fn inner(&self) -> &S {
+        &self.inner
+    }
 }
 
 impl<S: SatelliteSource> SatelliteSource for TimedSource<S> {

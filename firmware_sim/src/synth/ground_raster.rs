@@ -65,8 +65,9 @@ impl GroundRaster {
         if !(fx >= 0.0 && fy >= 0.0) {
             return self.outside.map(f32::from);
         }
+        // `as usize` saturates (an infinite `fx` gives usize::MAX), so compare without adding.
         let (x0, y0) = (fx as usize, fy as usize);
-        if x0 + 1 >= self.width_px || y0 + 1 >= self.height_px {
+        if x0 >= self.width_px.saturating_sub(1) || y0 >= self.height_px.saturating_sub(1) {
             return self.outside.map(f32::from);
         }
         let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);

@@ -1,0 +1,208 @@
+//! Inputs that used to panic or pass silently, each turned into a clear refusal: `drive`'s
+//! numeric arguments out of range (exit 2, the argument named), `render` over a frame at
+//! `x_m = 1e308` (exit 2, the frame file named; it overflowed in the world raster), and a
+//! `drive` whose every step runs without the satellite prior (exit 5, the reason named; it
+//! exited 0 silently). The issue's case was a pack of 8-64 px tiles (every crop `TooManyTiles`);
+//! the route-pack builder now refuses such tiles, so the pack here is of another place (every
+//! crop finds no coverage). The crop-fault reasons are covered by `harness::degraded`'s tests.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use satmap_runtime::geo::Geodetic;
+use satmap_sim::harness::world_imagery::RasterImagery;
+use satmap_sim::harness::{EXIT_BAD_INPUT, EXIT_DEGRADED};
+use satmap_sim::route_pack_builder::{BuildOptions, build_pack, parse_route_geojson};
+use satmap_sim::synth::scenario::{ScenarioPlacement, route_geojson};
+use satmap_sim::synth::{DriveConfig, SyntheticDrive, write_scenario};
+
+const FRAMES: usize = 3;
+
+fn bundle() -> &'static str {
+    concat!(env!("CARGO_MANIFEST_DIR"), "/../models/bundles/test")
+}
+
+fn run(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_satmap-sim"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A 3-frame synthetic scenario folder in Boston whose manifest names a route pack of the same
+/// world placed one degree (111 km) further north: no crop of the drive touches its tiles.
+/// Written once, shared by the tests.
+fn scenario_with_a_pack_elsewhere() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("satmap_cli_refusals_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let drive = SyntheticDrive::new(
+            7,
+            DriveConfig {
+                num_frames: FRAMES,
+                frame_rate_hz: 2.0,
+                ..DriveConfig::default()
+            },
+        )
+        .unwrap();
+        let placement = ScenarioPlacement::default();
+        write_scenario(&drive, &dir, &placement, |_| {}).unwrap();
+        let a = placement.anchor;
+        let elsewhere = Geodetic::new(a.lat_deg + 1.0, a.lon_deg, a.height_m);
+        let route =
+            parse_route_geojson(&route_geojson(&drive, elsewhere), Path::new("<drive>")).unwrap();
+        let mut imagery = RasterImagery::new(drive.satellite(), elsewhere);
+        let pack = build_pack(
+            &mut imagery,
+            &route,
+            &BuildOptions {
+                corridor_width_m: 80.0,
+                ..BuildOptions::default()
+            },
+        )
+        .unwrap();
+        std::fs::write(dir.join("elsewhere.pack"), &pack.bytes).unwrap();
+        let manifest_path = dir.join("scenario.toml");
+        let mut manifest: toml::Table = std::fs::read_to_string(&manifest_path)
+            .unwrap()
+            .parse()
+            .unwrap();
+        manifest.insert("route_pack".into(), "elsewhere.pack".into());
+        std::fs::write(&manifest_path, toml::to_string(&manifest).unwrap()).unwrap();
+        dir
+    })
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
+
+#[test]
+fn drive_numeric_arguments_out_of_range_are_refused_naming_the_argument() {
+    for (flag, value) in [
+        ("--frames", "0"),
+        ("--frames", "100001"),
+        ("--speed-mps", "NaN"),
+        ("--speed-mps", "-1"),
+        ("--speed-mps", "60"),
+        ("--drive-hz", "0"),
+        ("--drive-hz", "inf"),
+        ("--drive-hz", "1e-300"),
+        ("--rate-hz", "1e-300"),
+        ("--rate-hz", "NaN"),
+        ("--arena-bytes", "0"),
+        ("--max-degraded-share", "-0.1"),
+        ("--max-degraded-share", "1.5"),
+        ("--max-degraded-share", "NaN"),
+    ] {
+        let arg = format!("{flag}={value}");
+        let (code, _, stderr) = run(&["drive", "--bundle", bundle(), "--quiet", &arg]);
+        assert_eq!(
+            code,
+            Some(i32::from(EXIT_BAD_INPUT)),
+            "{flag} {value}: {stderr}"
+        );
+        assert!(
+            stderr.contains(&format!("error: {flag} ")) && stderr.contains(" must be in "),
+            "{flag} {value}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+#[test]
+fn render_refuses_a_frame_at_1e308_naming_its_file() {
+    let dir = std::env::temp_dir().join(format!("satmap_cli_render_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    copy_dir(scenario_with_a_pack_elsewhere(), &dir);
+    let frame = dir.join("frames/000001/frame.toml");
+    let mut record: toml::Table = std::fs::read_to_string(&frame).unwrap().parse().unwrap();
+    record.insert("x_m".into(), 1e308.into());
+    std::fs::write(&frame, toml::to_string(&record).unwrap()).unwrap();
+    let out = dir.join("pictures");
+    let (code, _, stderr) = run(&[
+        "render",
+        "--scenario",
+        dir.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{}: ego pose x_m 1e308", frame.display())),
+        "{stderr}"
+    );
+    // Frame 0 was fine and was drawn before frame 1 was refused.
+    assert!(out.join("frame_000000.png").is_file());
+    assert!(!out.join("frame_000001.png").exists());
+
+    let (code, _, stderr) = run(&[
+        "render",
+        "--scenario",
+        dir.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--every",
+        "0",
+    ]);
+    assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{stderr}");
+    assert!(stderr.contains("--every 0 must be at least 1"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn drive_over_a_pack_of_another_place_exits_degraded_naming_the_reason() {
+    let dir = scenario_with_a_pack_elsewhere();
+    let (code, stdout, stderr) = run(&[
+        "drive",
+        "--bundle",
+        bundle(),
+        "--scenario",
+        dir.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--rate-hz",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(code, Some(i32::from(EXIT_DEGRADED)), "{stderr}");
+    assert!(
+        stderr.contains(
+            "degraded run: 3 of 3 steps (100.0%) ran without the satellite prior, more than the \
+             stated 5.0% (--max-degraded-share 0.05): no coverage (no imagery in the route pack \
+             under the crop) 3 (100.0%)"
+        ),
+        "{stderr}"
+    );
+    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let d = &report["degraded"];
+    assert_eq!(d["steps"], 3);
+    assert_eq!(d["share"], 1.0);
+    assert_eq!(d["max_share"], 0.05);
+    assert_eq!(d["over_limit"], true);
+    assert_eq!(
+        d["by_reason"],
+        serde_json::json!([{ "reason": "no_coverage", "steps": 3, "share": 1.0 }])
+    );
+    for step in report["steps"].as_array().unwrap() {
+        assert_eq!(step["degraded"], true);
+        assert_eq!(step["degraded_reason"], "no_coverage");
+    }
+}
