@@ -206,3 +206,63 @@ fn drive_over_a_pack_of_another_place_exits_degraded_naming_the_reason() {
         assert_eq!(step["degraded_reason"], "no_coverage");
     }
 }
+
+/// The case: a pack of tiles too small for the model's crop (the builder accepts 16 px
+/// tiles for a 40 x 20 px crop it was told of, but the `test` model crops 200 x 100 px at 0.3 m)
+/// made every crop `TooManyTiles` and the drive ran degraded. `drive` now refuses it at load.
+#[test]
+fn drive_refuses_a_pack_whose_tiles_cannot_serve_the_models_crop() {
+    let dir = std::env::temp_dir().join(format!("satmap_cli_tiles_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    copy_dir(scenario_with_a_pack_elsewhere(), &dir);
+    let drive = SyntheticDrive::new(
+        7,
+        DriveConfig {
+            num_frames: FRAMES,
+            frame_rate_hz: 2.0,
+            ..DriveConfig::default()
+        },
+    )
+    .unwrap();
+    let anchor = ScenarioPlacement::default().anchor;
+    let route = parse_route_geojson(&route_geojson(&drive, anchor), Path::new("<drive>")).unwrap();
+    let mut imagery = RasterImagery::new(drive.satellite(), anchor);
+    let small_crop = satmap_runtime::CropSpec {
+        height_px: 40,
+        width_px: 20,
+        gsd_m: 0.15,
+        x_min_m: -1.5,
+        y_min_m: -3.0,
+    };
+    let pack = build_pack(
+        &mut imagery,
+        &route,
+        &BuildOptions {
+            corridor_width_m: 20.0,
+            tile_size_px: 16,
+            crop: small_crop,
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
+    std::fs::write(dir.join("elsewhere.pack"), &pack.bytes).unwrap();
+    let (code, _, stderr) = run(&[
+        "drive",
+        "--bundle",
+        bundle(),
+        "--scenario",
+        dir.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--rate-hz",
+        "1",
+        "--quiet",
+    ]);
+    assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{stderr}");
+    assert!(
+        stderr.contains("its tiles cannot serve the model's satellite crop (TooManyTiles"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -134,10 +134,20 @@ pub fn replay(
     let engine = TimedEngine::new(engine, frames, alloc);
     let after_engine = stats_of(alloc);
     label(alloc, ArenaRegion::RuntimeRegions);
-    let satellite = TimedSource::new(
-        PackSource::from_bytes(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?,
-        frames,
-    );
+    let pack_source =
+        PackSource::from_bytes(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?;
+    // A pack whose tiles are too small for the model's crop would fail every crop and run the
+    // whole drive degraded: refuse it at load instead.
+    pack_source
+        .check_crop_spec(&bundle.dims().crop_spec())
+        .map_err(|fault| {
+            HarnessError::Pack(format!(
+                "its tiles cannot serve the model's satellite crop ({fault:?}, at most {} \
+                 tiles a crop)",
+                satmap_runtime::route_pack::MAX_CROP_TILES
+            ))
+        })?;
+    let satellite = TimedSource::new(pack_source, frames);
     // The virtual clock sets the timestamps: a slow replay must not look like an outage.
     let limits = FrameLimits {
         max_timestamp_gap_us: FrameLimits::DEFAULT

@@ -38,4 +38,9 @@ impl<S: SatelliteSource> SatelliteSource for TimedSource<S> {
         self.crop_us.record(micros_since(t));
         c
     }
+
+    /// Passed through, so `SatMap::reset` reaches the wrapped source (a pack's route cursor).
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
 }
