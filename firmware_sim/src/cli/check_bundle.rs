@@ -166,10 +166,12 @@ pub fn check_dir(dir: &Path) -> Result<f32, CheckError> {
     check_reference(bundle.dims(), &reference).map_err(|e| corrupt(e.to_string()))?;
     let mut engine = TractEngine::load(&bundle).map_err(|e| bundle_error(&e))?;
     println!(
-        "{}: config `{}`, loaded and optimised in {:.1} s",
+        "{}: config `{}`, loaded and optimised in {:.1} s\n  bundle digest {} (pin with \
+         Bundle::open_pinned)",
         dir.display(),
         crate::harness::bundle_config_name(dir),
-        started.elapsed().as_secs_f64()
+        started.elapsed().as_secs_f64(),
+        bundle.digest()
     );
     let checks = check_all(&mut engine, &reference).map_err(|e| match e {
         ReferenceFault::Corrupt(m) => corrupt(m),

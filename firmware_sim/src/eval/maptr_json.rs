@@ -11,7 +11,8 @@
 //! Points are in the sample's ego frame, metres (x right, y forward). `confidence_level` may be
 //! absent (ground truth) and is then 1.0. The class is `type` (the label MapTR's evaluator
 //! reads) when present, else `cls_name`; when both are present they must agree. `pts_num`, when
-//! present, must equal the number of points.
+//! present, must equal the number of points. Coordinates must be finite and within
+//! [`MAX_COORDINATE_M`] of the ego.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -20,6 +21,11 @@ use serde::{Deserialize, Serialize};
 
 use super::average_precision::SampleSet;
 use super::map_vector::{MapClass, MapVector};
+
+/// Largest coordinate magnitude a file may hold, metres: far beyond any map range, and small
+/// enough that the evaluator's lengths and buffers stay finite (a finite 1e308 made the
+/// resampled line NaN and the buffer panic; fuzz finding, `tests/fuzz_parsers.rs`).
+pub const MAX_COORDINATE_M: f64 = 1e6;
 
 /// Errors reading or writing a results file.
 #[derive(Debug, thiserror::Error)]
@@ -257,6 +263,16 @@ impl VectorRecord {
         }
         if self.pts.iter().flatten().any(|c| !c.is_finite()) {
             return Err(bad("non-finite coordinate".to_owned()));
+        }
+        if let Some(c) = self
+            .pts
+            .iter()
+            .flatten()
+            .find(|c| c.abs() > MAX_COORDINATE_M)
+        {
+            return Err(bad(format!(
+                "coordinate {c} m is beyond {MAX_COORDINATE_M} m from the ego"
+            )));
         }
         let score = self.confidence_level.unwrap_or(1.0);
         if !score.is_finite() {

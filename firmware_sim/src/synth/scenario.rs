@@ -396,7 +396,9 @@ impl Scenario {
             message: e.to_string(),
         })?;
         let (w, h) = (self.manifest.image_width_px, self.manifest.image_height_px);
-        let mut images = Vec::with_capacity(6 * w * h * 3);
+        // Sized from the first decoded image, not from `scenario.toml`: sizes in the file are
+        // unchecked, and 6 * w * h * 3 of them overflows or asks for terabytes (fuzz finding).
+        let mut images = Vec::new();
         for c in 0..6 {
             let path = fdir.join(format!("cam{c}.png"));
             let img = image::open(&path)
@@ -410,6 +412,9 @@ impl Scenario {
                     path,
                     message: format!("{}x{}, expected {w}x{h}", img.width(), img.height()),
                 });
+            }
+            if c == 0 {
+                images.reserve_exact(6 * img.as_raw().len());
             }
             images.extend_from_slice(img.as_raw());
         }
