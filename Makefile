@@ -29,7 +29,7 @@ test-rust:
 	$(CARGO) test --workspace --exclude satmap-nostd-check
 
 # The fuzz campaign (never run in CI; CI runs the same file at 256 cases per parser): 7 parsers x
-# FUZZ_CASES inputs (1,050,000 by default) through tests/fuzz_parsers.rs, one line per parser
+# FUZZ_CASES inputs (1,050,000 by default) through tests/fuzz_parsers/, one line per parser
 # ("inputs run: N ... panics found: 0"), then the total; ~6 min on 2 cores. The test profile, not
 # --release: opt-level 3 with debug assertions and overflow checks, which catch more.
 # FUZZ_SEED=<u64> repeats a run. See ARCHITECTURE.md "Fuzzing".

@@ -117,19 +117,48 @@ fn numbers_behind_a_forged_digest_are_still_range_checked() {
     let text = manifest(tmp.path());
     let cases = [
         // The flip the adversarial test found: -15 -> -14 moved the map by a metre.
-        ("pc_range_m = [-15.0,", "pc_range_m = [-14.0,"),
-        ("gkt_heights_m = [-1.5,", "gkt_heights_m = [-2.5,"),
-        ("sat_gsd_m = 0.3", "sat_gsd_m = 0.31"),
-        ("embed_dims = 32", "embed_dims = 4611686018427387904"),
-        ("pad_h = 192", "pad_h = 170"),
-        ("image_scale = 0.2", "image_scale = -0.2"),
-        ("top_k = 50", "top_k = 51"),
+        (
+            "pc_range_m = [-15.0,",
+            "pc_range_m = [-14.0,",
+            "sat_w * sat_gsd_m differs from the x extent of pc_range_m",
+        ),
+        (
+            "gkt_heights_m = [-1.5,",
+            "gkt_heights_m = [-2.5,",
+            "gkt_heights_m[0] lies outside the z range of pc_range_m",
+        ),
+        (
+            "sat_gsd_m = 0.3",
+            "sat_gsd_m = 0.31",
+            "sat_w * sat_gsd_m differs from the x extent of pc_range_m",
+        ),
+        (
+            "sat_gsd_m = 0.3",
+            "sat_gsd_m = 3000000.0",
+            "model field `sat_gsd_m` exceeds its maximum 100",
+        ),
+        (
+            "embed_dims = 32",
+            "embed_dims = 4611686018427387904",
+            "model dimensions overflow a buffer length",
+        ),
+        (
+            "pad_h = 192",
+            "pad_h = 170",
+            "pad_h is smaller than image_h",
+        ),
+        (
+            "image_scale = 0.2",
+            "image_scale = -0.2",
+            "model field `image_scale` must be positive",
+        ),
+        ("top_k = 50", "top_k = 51", "top_k 51 exceeds 50"),
     ];
-    for (from, to) in cases {
+    for (from, to, why) in cases {
         assert!(text.contains(from), "{from}");
         write_resealed(tmp.path(), &text.replacen(from, to, 1));
         match Bundle::open(tmp.path()) {
-            Err(BundleError::Manifest { .. } | BundleError::Dims { .. }) => {}
+            Err(BundleError::Dims { reason, .. }) => assert_eq!(reason, why, "{to}"),
             other => panic!("{to}: {other:?}"),
         }
     }

@@ -417,6 +417,13 @@ pub enum DimsError {
         /// Field name.
         field: &'static str,
     },
+    /// A quantity above its maximum.
+    AboveMax {
+        /// Field name.
+        field: &'static str,
+        /// The largest accepted value (whole units of the field).
+        max: u32,
+    },
     /// A derived buffer length in bytes does not fit `usize`.
     SizeOverflow,
     /// A GKT reference height lies outside the z range of `pc_range_m`.
@@ -479,6 +486,9 @@ impl fmt::Display for DimsError {
             }
             Self::NotPositive { field } => write!(f, "model field `{field}` must be positive"),
             Self::SizeOverflow => write!(f, "model dimensions overflow a buffer length"),
+            Self::AboveMax { field, max } => {
+                write!(f, "model field `{field}` exceeds its maximum {max}")
+            }
             Self::HeightOutsideRange { head } => write!(
                 f,
                 "gkt_heights_m[{head}] lies outside the z range of pc_range_m"

@@ -13,6 +13,10 @@ use crate::capacity::{
 use crate::error::DimsError;
 use crate::satellite::CropSpec;
 
+/// Coarsest satellite ground sampling distance a model may ask for, metres per pixel (the route
+/// pack's own limit): coarser crops would step the sampler by more pack pixels than it indexes.
+pub const MAX_SAT_GSD_M: f64 = 100.0;
+
 /// Class names in head order, as the manifest spells them.
 pub const CLASS_NAMES: [&str; NUM_CLASSES] = ["divider", "ped_crossing", "boundary"];
 
@@ -193,6 +197,12 @@ impl ModelDims {
         }
         if self.sat_gsd_m <= 0.0 {
             return Err(DimsError::NotPositive { field: "sat_gsd_m" });
+        }
+        if self.sat_gsd_m > MAX_SAT_GSD_M {
+            return Err(DimsError::AboveMax {
+                field: "sat_gsd_m",
+                max: MAX_SAT_GSD_M as u32,
+            });
         }
         for axis in 0..3u8 {
             let a = usize::from(axis);
@@ -467,7 +477,12 @@ sat_gsd_m = 0.3
         assert_eq!(dims, ModelDims::test_config());
         let bad = text.replace("\"boundary\"", "\"kerb\"");
         assert!(toml::from_str::<ModelDims>(&bad).is_err());
+        // Parsing does not range-check; `validate` (run by `Bundle::open`) does.
         let bad = text.replace("top_k = 50", "top_k = 60");
-        assert!(toml::from_str::<ModelDims>(&bad).is_err());
+        let parsed: ModelDims = toml::from_str(&bad).unwrap();
+        assert_eq!(
+            parsed.validate(),
+            Err(DimsError::TopKTooLarge { top_k: 60, max: 50 })
+        );
     }
 }

@@ -73,8 +73,6 @@ pub fn check_regions(dims: &ModelDims) -> Result<(), InitError> {
 mod tests {
     use super::*;
     use crate::map_frame::MapFrame;
-    use InitError;
-    use ModelDims;
 
     #[test]
     fn test_config_fits_every_region() {

@@ -30,6 +30,8 @@ pub(crate) struct FakeEngine {
     pub fail_next: Option<Stage>,
     /// Make the decoder emit a NaN logit on the next call (then clear).
     pub nan_next: bool,
+    /// Make the decoder emit a finite but huge point (1e37) on the next call (then clear).
+    pub huge_point_next: bool,
     /// Stages run, in order (bounded; for ordering checks).
     pub calls: heapless::Vec<Stage, 64>,
 }
@@ -40,6 +42,7 @@ impl FakeEngine {
             dims,
             fail_next: None,
             nan_next: false,
+            huge_point_next: false,
             calls: heapless::Vec::new(),
         }
     }
@@ -178,6 +181,10 @@ impl Engine for FakeEngine {
             let x =
                 camera_bev[(i * 7) % camera_bev.len()] + satellite_bev[(i * 5) % camera_bev.len()];
             *p = x.abs().fract();
+        }
+        if self.huge_point_next {
+            self.huge_point_next = false;
+            points_out[1] = 1e37;
         }
         Ok(())
     }

@@ -1,5 +1,7 @@
 //! The `[model]` table of `manifest.toml` exactly as the manifest spells it (class and camera
-//! names, `gkt_kernel` as a pair), converted into [`ModelDims`] and validated on the way.
+//! names, `gkt_kernel` as a pair), converted into [`ModelDims`]. The numbers are range-checked
+//! after parsing (`ModelDims::validate`, called by `Bundle::open`), so a TOML error and a value
+//! out of range are told apart.
 
 use crate::capacity::NUM_HEADS;
 use crate::model_dims::{CLASS_NAMES, MANIFEST_CAMERAS, ModelDims};
@@ -52,7 +54,7 @@ impl TryFrom<ModelTable> for ModelDims {
                 t.cameras
             ));
         }
-        let dims = ModelDims {
+        Ok(ModelDims {
             embed_dims: t.embed_dims,
             bev_h: t.bev_h,
             bev_w: t.bev_w,
@@ -73,8 +75,6 @@ impl TryFrom<ModelTable> for ModelDims {
             sat_h: t.sat_h,
             sat_w: t.sat_w,
             sat_gsd_m: t.sat_gsd_m,
-        };
-        dims.validate().map_err(|e| e.to_string())?;
-        Ok(dims)
+        })
     }
 }

@@ -402,8 +402,10 @@ impl<'a> PackSource<'a> {
                     ((u as u64) & 0xFFFF_FFFF) >> 16,
                     ((v as u64) & 0xFFFF_FFFF) >> 16,
                 );
-                u += du;
-                v += dv;
+                // Wrapping: after a row's last pixel (or for an absurd 1 px crop at 2^31 pack
+                // pixels a step) the next value is never used, and an overflow must not panic.
+                u = u.wrapping_add(du);
+                v = v.wrapping_add(dv);
                 match window.bilinear(x, y, fx, fy) {
                     Ok(rgb) => {
                         dst.copy_from_slice(&rgb);

@@ -4,7 +4,8 @@
 //!
 //! Step order: frame checks -> CAN-bus vector -> `bev_query` -> six `image_encoder` runs ->
 //! gather-sum -> `bev_encoder` -> satellite crop (source) -> `satellite_encoder`, or zeros when
-//! the prior is missing or corrupt (degraded) -> `map_decoder` -> finiteness check -> decode ->
+//! the prior is missing or corrupt (degraded) -> `map_decoder` -> finiteness check (normalised
+//! points also within [`MAX_NORMALISED_POINT`]) -> decode ->
 //! digest. Failure at any point returns a [`StepError`] and leaves the last published map, the
 //! last sequence and timestamp untouched; intermediate buffers then hold the partial step.
 //! `step` allocates nothing.
@@ -28,6 +29,10 @@ use crate::gkt::{Lut, gather_sum};
 use crate::map_frame::{self, Health, MapFrame, SatellitePrior};
 use crate::model_dims::ModelDims;
 use crate::satellite::{Coverage, SatelliteSource};
+
+/// Largest magnitude of a normalised decoder point the step publishes (the model's points are
+/// sigmoid outputs in [0, 1]): anything beyond, or NaN, is [`StepError::NonFiniteOutput`].
+pub const MAX_NORMALISED_POINT: f32 = 1e6;
 
 /// The SatMap runtime: one instance per vehicle, one [`SatMap::step`] per cycle.
 pub struct SatMap<E: Engine, S: SatelliteSource> {
@@ -131,7 +136,11 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
             &mut b.logits,
             &mut b.points,
         )?;
-        if !b.logits.iter().chain(&b.points).all(|v| v.is_finite()) {
+        // Points are normalised to the BEV range (sigmoid outputs in [0, 1]); a finite but huge
+        // value would still decode to an infinite coordinate in metres, so bound them too.
+        if !(b.logits.iter().all(|v| v.is_finite())
+            && b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT))
+        {
             return Err(StepError::NonFiniteOutput {
                 stage: Stage::MapDecoder,
             });

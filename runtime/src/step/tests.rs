@@ -234,6 +234,32 @@ fn engine_failure_and_nan_output_leave_state_untouched() {
     assert_eq!(rt.step(&images.frame(1)).unwrap().sequence, 1);
 }
 
+/// A finite normalised point of 1e37 would decode to an infinite coordinate in metres (and
+/// reach the evaluator's polygon buffer as NaN): refused like a NaN, the last map kept.
+#[test]
+fn a_huge_finite_point_is_refused_as_non_finite_output() {
+    let dims = ModelDims::test_config();
+    let c = crop(&dims);
+    let images = Images::new(&dims, 4);
+    let mut rt = runtime(&c);
+    let first = rt.step(&images.frame(1)).unwrap().clone();
+    rt.engine_mut().huge_point_next = true;
+    assert_eq!(
+        rt.step(&images.frame(2)).unwrap_err(),
+        StepError::NonFiniteOutput {
+            stage: Stage::MapDecoder
+        }
+    );
+    assert_eq!(rt.last_map(), Some(&first));
+    assert!(
+        first
+            .elements
+            .iter()
+            .all(|e| e.points_m.iter().all(|p| p.is_finite()))
+    );
+    assert_eq!(rt.step(&images.frame(2)).unwrap().sequence, 2);
+}
+
 /// Satellite sources for the degraded-mode test.
 struct Scripted(Coverage);
 
