@@ -35,6 +35,35 @@ fn run(args: &[&str]) -> (Option<i32>, String, String) {
     )
 }
 
+/// The scenarios' drive: seed 7, [`FRAMES`] frames at 2 Hz.
+fn seven() -> SyntheticDrive {
+    SyntheticDrive::new(
+        7,
+        DriveConfig {
+            num_frames: FRAMES,
+            frame_rate_hz: 2.0,
+            ..DriveConfig::default()
+        },
+    )
+    .unwrap()
+}
+
+/// `drive` over the scenario folder `dir`, its 3 frames at 1 Hz, with one output flag.
+fn drive_scenario(dir: &Path, output_flag: &str) -> (Option<i32>, String, String) {
+    run(&[
+        "drive",
+        "--bundle",
+        bundle(),
+        "--scenario",
+        dir.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--rate-hz",
+        "1",
+        output_flag,
+    ])
+}
+
 /// A 3-frame synthetic scenario folder in Boston whose manifest names a route pack of the same
 /// world placed one degree (111 km) further north: no crop of the drive touches its tiles.
 /// Written once, shared by the tests.
@@ -43,15 +72,7 @@ fn scenario_with_a_pack_elsewhere() -> &'static Path {
     DIR.get_or_init(|| {
         let dir = std::env::temp_dir().join(format!("satmap_cli_refusals_{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let drive = SyntheticDrive::new(
-            7,
-            DriveConfig {
-                num_frames: FRAMES,
-                frame_rate_hz: 2.0,
-                ..DriveConfig::default()
-            },
-        )
-        .unwrap();
+        let drive = seven();
         let placement = ScenarioPlacement::default();
         write_scenario(&drive, &dir, &placement, |_| {}).unwrap();
         let a = placement.anchor;
@@ -170,18 +191,7 @@ fn render_refuses_a_frame_at_1e308_naming_its_file() {
 #[test]
 fn drive_over_a_pack_of_another_place_exits_degraded_naming_the_reason() {
     let dir = scenario_with_a_pack_elsewhere();
-    let (code, stdout, stderr) = run(&[
-        "drive",
-        "--bundle",
-        bundle(),
-        "--scenario",
-        dir.to_str().unwrap(),
-        "--frames",
-        "3",
-        "--rate-hz",
-        "1",
-        "--json",
-    ]);
+    let (code, stdout, stderr) = drive_scenario(dir, "--json");
     assert_eq!(code, Some(i32::from(EXIT_DEGRADED)), "{stderr}");
     assert!(
         stderr.contains(
@@ -215,15 +225,7 @@ fn drive_refuses_a_pack_whose_tiles_cannot_serve_the_models_crop() {
     let dir = std::env::temp_dir().join(format!("satmap_cli_tiles_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     copy_dir(scenario_with_a_pack_elsewhere(), &dir);
-    let drive = SyntheticDrive::new(
-        7,
-        DriveConfig {
-            num_frames: FRAMES,
-            frame_rate_hz: 2.0,
-            ..DriveConfig::default()
-        },
-    )
-    .unwrap();
+    let drive = seven();
     let anchor = ScenarioPlacement::default().anchor;
     let route = parse_route_geojson(&route_geojson(&drive, anchor), Path::new("<drive>")).unwrap();
     let mut imagery = RasterImagery::new(drive.satellite(), anchor);
@@ -246,18 +248,7 @@ fn drive_refuses_a_pack_whose_tiles_cannot_serve_the_models_crop() {
     )
     .unwrap();
     std::fs::write(dir.join("elsewhere.pack"), &pack.bytes).unwrap();
-    let (code, _, stderr) = run(&[
-        "drive",
-        "--bundle",
-        bundle(),
-        "--scenario",
-        dir.to_str().unwrap(),
-        "--frames",
-        "3",
-        "--rate-hz",
-        "1",
-        "--quiet",
-    ]);
+    let (code, _, stderr) = drive_scenario(&dir, "--quiet");
     assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{stderr}");
     assert!(
         stderr.contains("its tiles cannot serve the model's satellite crop (TooManyTiles"),
