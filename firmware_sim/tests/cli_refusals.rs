@@ -257,3 +257,53 @@ fn drive_refuses_a_pack_whose_tiles_cannot_serve_the_models_crop() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Drive settings that hung (`--image-width 100000`: six 100000 x 180 renders a frame;
+/// `--fps 1e-300`: a road of 1e301 m generated up front) or wrote an empty drive (`--frames 0`)
+/// are refused before any work, as bad input.
+#[test]
+fn synth_drive_settings_that_hung_are_refused_before_any_work() {
+    let out = std::env::temp_dir().join(format!("satmap_cli_synth_{}", std::process::id()));
+    for (flag, value, why) in [
+        (
+            "--image-width",
+            "100000",
+            "image width and height must be in 8..=4096 px",
+        ),
+        (
+            "--image-height",
+            "4",
+            "image width and height must be in 8..=4096 px",
+        ),
+        ("--frames", "0", "num_frames must be in 1..=100000"),
+        ("--fps", "1e-300", "frame_rate_hz must be in [0.01, 100]"),
+        ("--fps", "1e300", "frame_rate_hz must be in [0.01, 100]"),
+        ("--fps", "NaN", "frame_rate_hz must be in [0.01, 100]"),
+        (
+            "--fps",
+            "0.01",
+            "the drive needs a road longer than 100 km (frames / rate x speed)",
+        ),
+    ] {
+        let arg = format!("{flag}={value}");
+        let frames = if flag == "--frames" {
+            &arg
+        } else {
+            "--frames=200"
+        };
+        let mut args = vec![
+            "synth-drive",
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+            frames,
+        ];
+        if flag != "--frames" {
+            args.push(&arg);
+        }
+        let (code, _, stderr) = run(&args);
+        assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{arg}: {stderr}");
+        assert_eq!(stderr, format!("error: drive config: {why}\n"), "{arg}");
+    }
+    assert!(!out.join("scenario.toml").exists());
+}

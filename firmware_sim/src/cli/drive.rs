@@ -89,7 +89,12 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     if e.downcast_ref::<BudgetExceeded>().is_some() {
         return EXIT_BUDGET_EXCEEDED;
     }
-    if e.downcast_ref::<BadArgument>().is_some() {
+    if e.downcast_ref::<BadArgument>().is_some()
+        || matches!(
+            e.downcast_ref::<crate::synth::SynthError>(),
+            Some(crate::synth::SynthError::Config(_))
+        )
+    {
         return EXIT_BAD_INPUT;
     }
     if let Some(r) = e.downcast_ref::<crate::cli::render::RenderError>() {

@@ -28,6 +28,19 @@ pub const GRAVITY_MPS2: f32 = 9.81;
 /// frame counts as occluded, metres.
 pub const OCCLUSION_NEAR_M: f64 = 0.5;
 
+/// Smallest camera image side, pixels.
+pub const MIN_IMAGE_SIDE_PX: usize = 8;
+/// Largest camera image side, pixels (above any ECU camera the model is sized for).
+pub const MAX_IMAGE_SIDE_PX: usize = 4096;
+/// Most frames in one drive.
+pub const MAX_FRAMES: usize = 100_000;
+/// Slowest frame rate, Hz.
+pub const MIN_FRAME_RATE_HZ: f64 = 0.01;
+/// Fastest frame rate, Hz.
+pub const MAX_FRAME_RATE_HZ: f64 = 100.0;
+/// Longest road a drive's world is generated for, metres.
+pub const MAX_ROUTE_LENGTH_M: f64 = 100_000.0;
+
 /// First frame's timestamp, microseconds.
 pub const START_TIMESTAMP_US: u64 = 1_000_000;
 
@@ -131,11 +144,15 @@ impl SyntheticDrive {
         calibration: Calibration,
     ) -> Result<Self, SynthError> {
         let bad = |m: &str| Err(SynthError::Config(m.to_owned()));
-        if config.image_width_px == 0 || config.image_height_px == 0 {
-            return bad("image size must be positive");
+        let side = MIN_IMAGE_SIDE_PX..=MAX_IMAGE_SIDE_PX;
+        if !(side.contains(&config.image_width_px) && side.contains(&config.image_height_px)) {
+            return bad("image width and height must be in 8..=4096 px");
         }
-        if !(config.frame_rate_hz > 0.0 && config.frame_rate_hz.is_finite()) {
-            return bad("frame_rate_hz must be positive");
+        if !(1..=MAX_FRAMES).contains(&config.num_frames) {
+            return bad("num_frames must be in 1..=100000");
+        }
+        if !(MIN_FRAME_RATE_HZ..=MAX_FRAME_RATE_HZ).contains(&config.frame_rate_hz) {
+            return bad("frame_rate_hz must be in [0.01, 100]");
         }
         if !(config.mean_speed_mps >= 0.0 && config.mean_speed_mps < 60.0) {
             return bad("mean_speed_mps must be in [0, 60)");
@@ -152,6 +169,13 @@ impl SyntheticDrive {
         let start_s_m = 30.0;
         let duration_s = config.num_frames as f64 / config.frame_rate_hz;
         let needed_m = start_s_m + duration_s * config.mean_speed_mps * 1.2 + 60.0;
+        // The world is generated and painted up front: its length bounds the work (a drive of
+        // 1e-300 Hz would otherwise ask for an unbounded road).
+        if !(config.route_length_m.is_finite()
+            && config.route_length_m.max(needed_m) <= MAX_ROUTE_LENGTH_M)
+        {
+            return bad("the drive needs a road longer than 100 km (frames / rate x speed)");
+        }
         let world_config = WorldConfig {
             route_length_m: config.route_length_m.max(needed_m),
             ..WorldConfig::default()
