@@ -7,6 +7,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
+use crate::cli::drive::BadArgument;
+use crate::eval::average_precision::NO_OVERLAP_DISTANCE_M;
 use crate::eval::maptr_files::{MAPTR_GT_FILE, MAPTR_RESULTS_FILE};
 use crate::eval::{EvalReport, evaluate_at, read_file, write_maptr_pair};
 
@@ -37,6 +39,7 @@ pub struct Args {
 /// # Errors
 /// Unreadable or malformed input files, or the report cannot be written.
 pub fn run(args: &Args) -> Result<()> {
+    check_thresholds(&args.thresholds_m)?;
     let predictions = read_file(&args.predictions)?;
     let gt = read_file(&args.gt)?;
     let report = evaluate_at(&predictions.samples, &gt.samples, &args.thresholds_m);
@@ -84,4 +87,48 @@ pub fn format_report(report: &EvalReport) -> String {
         report.num_samples
     );
     s
+}
+
+/// Thresholds must be finite and in (0, 100) m: NaN or a negative threshold matches nothing and
+/// silently scores 0, and one at or above [`NO_OVERLAP_DISTANCE_M`] would let pairs whose
+/// buffers never intersect match.
+fn check_thresholds(thresholds_m: &[f64]) -> Result<(), BadArgument> {
+    if thresholds_m.is_empty() {
+        return Err(BadArgument(
+            "--thresholds-m needs at least one threshold".into(),
+        ));
+    }
+    match thresholds_m
+        .iter()
+        .find(|t| !(**t > 0.0 && **t < NO_OVERLAP_DISTANCE_M))
+    {
+        Some(t) => Err(BadArgument(format!(
+            "--thresholds-m {t} must be in (0, {NO_OVERLAP_DISTANCE_M}) m"
+        ))),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_thresholds;
+
+    #[test]
+    fn thresholds_that_score_silently_wrong_are_refused() {
+        assert!(check_thresholds(&[0.5, 1.0, 1.5]).is_ok());
+        for bad in [
+            vec![],
+            vec![f64::NAN],
+            vec![0.5, -1.0],
+            vec![0.0],
+            vec![100.0],
+            vec![f64::INFINITY],
+        ] {
+            assert!(check_thresholds(&bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(
+            check_thresholds(&[1.0, f64::NAN]).unwrap_err().to_string(),
+            "--thresholds-m NaN must be in (0, 100) m"
+        );
+    }
 }
