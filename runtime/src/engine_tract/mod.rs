@@ -36,10 +36,7 @@ impl StageRunner {
     fn load(bundle: &Bundle, stage: Stage) -> Result<Self, BundleError> {
         let entry = bundle.manifest().stage(stage)?;
         let bytes = bundle.read_stage(stage)?;
-        let engine_err = |e: TractError| BundleError::Engine {
-            stage: stage.name(),
-            message: format!("{e:#}"),
-        };
+        let engine_err = engine_error(stage);
         let mut model = tract_onnx::onnx()
             .model_for_read(&mut bytes.as_slice())
             .map_err(engine_err)?;
@@ -186,6 +183,14 @@ fn datum(dtype: DType) -> DatumType {
     }
 }
 
+/// tract's error for `stage`, with its whole context chain.
+fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError + Copy {
+    move |e| BundleError::Engine {
+        stage: stage.name(),
+        message: format!("{e:#}"),
+    }
+}
+
 /// Bind by name: the graph's inputs and outputs must carry the manifest's names in the
 /// manifest's order (which [`crate::bundle::StageEntry::check_interface`] has checked is the
 /// runtime's). Two same-shape tensors swapped in the graph would otherwise load and run with
@@ -196,10 +201,7 @@ fn check_io_names(
     inputs: &[TensorSpec],
     outputs: &[TensorSpec],
 ) -> Result<(), BundleError> {
-    let engine_err = |e: TractError| BundleError::Engine {
-        stage: stage.name(),
-        message: format!("{e:#}"),
-    };
+    let engine_err = engine_error(stage);
     let input_names: Vec<&str> = model
         .input_outlets()
         .map_err(engine_err)?
@@ -263,10 +265,7 @@ fn check_graph_io(
             });
         }
         for (fact, spec) in facts.into_iter().zip(specs) {
-            let fact = fact.map_err(|e| BundleError::Engine {
-                stage: stage.name(),
-                message: format!("{e:#}"),
-            })?;
+            let fact = fact.map_err(engine_error(stage))?;
             let shape: Option<Vec<usize>> = fact.shape.as_concrete().map(<[usize]>::to_vec);
             if fact.datum_type != datum(spec.dtype) || shape.as_deref() != Some(&spec.shape[..]) {
                 return Err(BundleError::Interface {
