@@ -36,6 +36,7 @@ fn demo_drive_has_its_pinned_digest_fits_the_arena_and_does_not_grow_after_warm_
         rate_hz: 1e6 / STEP_PERIOD_US as f64,
         show_progress: false,
         max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
+        pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
     };
     let out = replay(&cfg, Some(&ALLOC)).unwrap();
     let r = &out.report;

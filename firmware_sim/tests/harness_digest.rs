@@ -17,6 +17,7 @@ fn config(seed: u64) -> ReplayConfig {
         rate_hz: 1.0,
         show_progress: false,
         max_degraded_share: satmap_sim::harness::DEFAULT_MAX_DEGRADED_SHARE,
+        pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
     }
 }
 

@@ -360,6 +360,8 @@ fn build_pack_command_writes_a_loadable_pack() {
         allow_missing: false,
         quiet: true,
         origin: None,
+        codec: satmap_sim::cli::build_pack::CodecArg::Raw,
+        jpeg_quality: 85,
     };
     satmap_sim::cli::build_pack::run(&args).unwrap();
     let bytes = std::fs::read(dir.join("route.pack")).unwrap();
@@ -623,21 +625,21 @@ fn a_10_km_corridor_at_8_px_tiles_is_refused_by_count() {
 
 #[test]
 fn a_pack_larger_than_the_route_pack_region_is_refused_by_size() {
-    // 256 px tiles of 38.4 m, 40 m either side of a 3001 m route east: rows -2..=1 (4),
-    // columns -2..=floor(3041 / 38.4) = 79 (82): 328 tiles. 80 + 2 * 16 + 328 * 16 +
-    // 328 * 196 608 = 64 492 784 bytes against the 32 MiB region.
+    // 256 px tiles of 38.4 m, 40 m either side of a 15001 m route east: rows -2..=1 (4),
+    // columns -2..=floor(15041 / 38.4) = 391 (394): 1576 tiles. 80 + 2 * 16 + 1576 * 16 +
+    // 1576 * 196 608 = 309 879 536 bytes against the 256 MiB region.
     let opts = BuildOptions {
         corridor_width_m: 80.0,
         ..BuildOptions::default()
     };
-    let err = refused(&[DVec2::ZERO, DVec2::new(3001.0, 0.0)], &opts);
+    let err = refused(&[DVec2::ZERO, DVec2::new(15001.0, 0.0)], &opts);
     assert!(
         matches!(
             err,
             BuildError::PackTooLarge {
                 what: "bytes",
-                needed: 64_492_784,
-                limit: 33_554_432,
+                needed: 309_879_536,
+                limit: 268_435_456,
                 ..
             }
         ),

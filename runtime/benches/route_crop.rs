@@ -8,7 +8,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec2;
 use satmap_runtime::geo::Geodetic;
 use satmap_runtime::pose::EgoPose;
-use satmap_runtime::route_pack::{PackHeader, PackSource, PackTile, TileKey, encode_pack};
+use satmap_runtime::route_pack::{
+    PackHeader, PackSource, PackTile, TileCodec, TileKey, encode_pack,
+};
 use satmap_runtime::satellite::CropSpec;
 
 const TILE_PX: u16 = 256;
@@ -26,7 +28,7 @@ fn pack(gsd_m: f64) -> Vec<u8> {
         .collect();
     let tiles: Vec<PackTile<'_>> = payloads
         .iter()
-        .map(|(key, rgb)| PackTile { key: *key, rgb })
+        .map(|(key, rgb)| PackTile { key: *key, payload: rgb })
         .collect();
     let header = PackHeader {
         tile_size_px: TILE_PX,
@@ -35,6 +37,7 @@ fn pack(gsd_m: f64) -> Vec<u8> {
         corridor_width_m: 60.0,
         tile_count: 0,
         route_point_count: 0,
+        codec: TileCodec::Raw,
     };
     encode_pack(
         &header,

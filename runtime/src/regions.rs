@@ -8,6 +8,11 @@ use crate::model_dims::ModelDims;
 
 // The tile cache region of the layout must describe the route-pack cache that exists.
 const _: () = assert!(layout::TILE_CACHE_SHAPE[0] == crate::route_pack::TILE_CACHE_TILES);
+// The decoded-tile region holds whole RGB tiles (`route_pack::codec`).
+const _: () = assert!(
+    layout::TILE_PIXELS_SHAPE[3] == crate::route_pack::format::CHANNELS
+        && layout::TILE_PIXELS_SHAPE[1] == layout::TILE_PIXELS_SHAPE[2]
+);
 
 /// Check that every runtime-owned region `dims` needs fits its capacity in `memory_layout.toml`.
 ///

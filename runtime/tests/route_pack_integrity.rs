@@ -169,10 +169,10 @@ fn load_errors_name_the_broken_rule() {
     magic[0] = b'X';
     assert_eq!(RoutePack::parse(&magic).unwrap_err(), PackError::BadMagic);
     let mut version = bytes.clone();
-    version[8] = 2;
+    version[8] = 3;
     assert_eq!(
         RoutePack::parse(&version).unwrap_err(),
-        PackError::UnsupportedVersion { version: 2 }
+        PackError::UnsupportedVersion { version: 3 }
     );
     let mut header = bytes.clone();
     header[20] ^= 4;

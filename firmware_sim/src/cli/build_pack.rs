@@ -7,8 +7,8 @@ use anyhow::{Context, Result};
 use satmap_runtime::geo::Geodetic;
 
 use crate::route_pack_builder::{
-    BuildOptions, Imagery, PAPER_CROP, SlippyTiles, WorldCrs, WorldFileImage, build_pack,
-    read_route_geojson,
+    BuildOptions, DEFAULT_JPEG_QUALITY, Imagery, PAPER_CROP, SlippyTiles, TileCompression,
+    WorldCrs, WorldFileImage, build_pack, read_route_geojson,
 };
 use satmap_runtime::satellite::CropSpec;
 
@@ -65,6 +65,38 @@ pub struct Args {
     /// first point at height 0. Use a synthetic world's anchor to keep its frame.
     #[arg(long, value_parser = parse_origin, allow_hyphen_values = true)]
     pub origin: Option<Geodetic>,
+    /// How tiles are stored: `raw` (format version 1, read in place), `jpeg` or `deflate`
+    /// (version 2, decoded on the vehicle into the `tile_pixels` region).
+    #[arg(long, value_enum, default_value_t = CodecArg::Raw)]
+    pub codec: CodecArg,
+    /// JPEG quality with `--codec jpeg`, 1..=100.
+    #[arg(long, default_value_t = DEFAULT_JPEG_QUALITY)]
+    pub jpeg_quality: u8,
+}
+
+/// Tile codec on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CodecArg {
+    /// Raw RGB (version 1).
+    Raw,
+    /// JPEG, lossy (version 2).
+    Jpeg,
+    /// zlib, lossless (version 2).
+    Deflate,
+}
+
+impl CodecArg {
+    /// The builder's compression for this codec.
+    #[must_use]
+    pub const fn compression(self, jpeg_quality: u8) -> TileCompression {
+        match self {
+            Self::Raw => TileCompression::Raw,
+            Self::Jpeg => TileCompression::Jpeg {
+                quality: jpeg_quality,
+            },
+            Self::Deflate => TileCompression::Deflate,
+        }
+    }
 }
 
 fn parse_origin(text: &str) -> Result<Geodetic, String> {
@@ -103,6 +135,7 @@ pub fn run(args: &Args) -> Result<()> {
             gsd_m: args.crop_gsd_m,
             ..PAPER_CROP
         },
+        compression: args.codec.compression(args.jpeg_quality),
     };
     opts.validate()?;
     let route = read_route_geojson(&args.route)?;
@@ -119,13 +152,18 @@ pub fn run(args: &Args) -> Result<()> {
     let built = build_pack(imagery.as_mut(), &route, &opts)?;
     std::fs::write(&args.out, &built.bytes)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let km = built.route_length_m / 1000.0;
     println!(
-        "{}: {} tiles ({} skipped), {:.1} MB, route {:.2} km, origin {:.7}, {:.7}, built in {:.1} s",
+        "{}: {} tiles ({} skipped), {:.1} MB ({:.2} MB/km; tiles {:.1}:1 against raw, PSNR {:.1} dB, worst tile {:.1} dB), route {:.2} km, origin {:.7}, {:.7}, built in {:.1} s",
         args.out.display(),
         built.tiles,
         built.skipped_tiles,
         built.bytes.len() as f64 / 1e6,
-        built.route_length_m / 1000.0,
+        built.bytes.len() as f64 / 1e6 / km.max(1e-9),
+        built.raw_tile_bytes as f64 / built.payload_bytes.max(1) as f64,
+        built.tile_psnr_db,
+        built.worst_tile_psnr_db,
+        km,
         built.origin.lat_deg,
         built.origin.lon_deg,
         started.elapsed().as_secs_f64()

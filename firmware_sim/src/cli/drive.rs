@@ -17,9 +17,12 @@ use anyhow::{Context, Result};
 use satmap_runtime::capacity::layout;
 
 use crate::arena::ArenaAllocator;
+use crate::cli::build_pack::CodecArg;
+use crate::route_pack_builder::DEFAULT_JPEG_QUALITY;
 use crate::harness::{
     DEFAULT_MAX_DEGRADED_SHARE, EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError,
-    MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, ReplayConfig, ScenarioInput, replay,
+    MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, ReplayConfig, RouteReplayConfig, ScenarioInput, replay,
+    replay_route,
 };
 use crate::render::{camera_sheet, render_frame, route_frame_geojson};
 
@@ -63,6 +66,19 @@ pub struct Args {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// How the harness stores the tiles of the pack it builds for the drive (`raw`, `jpeg`,
+    /// `deflate`; a scenario's own pack is used as it is).
+    #[arg(long, value_enum, default_value_t = CodecArg::Raw)]
+    pub pack_codec: CodecArg,
+    /// JPEG quality with `--pack-codec jpeg`, 1..=100.
+    #[arg(long, default_value_t = DEFAULT_JPEG_QUALITY)]
+    pub jpeg_quality: u8,
+    /// Replay only the satellite path along the whole route of this pack (crop, tile
+    /// verification, decode and prefetch per step at `--speed-mps` and `--drive-hz`, timed
+    /// against the `satellite_crop` budget), without the network: how a 100 km route is
+    /// replayed in minutes. The crop is the bundle's.
+    #[arg(long, value_name = "PACK")]
+    pub satellite_only: Option<PathBuf>,
 }
 
 /// The replay ran and a budget was exceeded (the report says which).
@@ -134,7 +150,11 @@ pub fn run(
         rate_hz,
         show_progress: !args.quiet && !args.json,
         max_degraded_share: args.max_degraded_share,
+        pack_compression: args.pack_codec.compression(args.jpeg_quality),
     };
+    if let Some(pack_path) = &args.satellite_only {
+        return run_satellite_only(args, pack_path, rate_hz_of(args));
+    }
     if !init(arena_bytes) {
         return Err(BadArgument("the arena was already initialised".into()).into());
     }
@@ -160,6 +180,46 @@ pub fn run(
             .into()),
         }
     })
+}
+
+fn rate_hz_of(args: &Args) -> f64 {
+    args.drive_hz
+}
+
+/// `--satellite-only`: the route replay, its report, and exit 4 when its worst step exceeds the
+/// `satellite_crop` budget.
+fn run_satellite_only(args: &Args, pack_path: &Path, rate_hz: f64) -> Result<()> {
+    let bundle = satmap_runtime::bundle::Bundle::open(&args.bundle)
+        .map_err(|e| BadArgument(format!("{}: {e}", args.bundle.display())))?;
+    let pack = std::fs::read(pack_path)
+        .map_err(|e| BadArgument(format!("{}: {e}", pack_path.display())))?;
+    let cfg = RouteReplayConfig {
+        crop: bundle.dims().crop_spec(),
+        speed_mps: args.speed_mps,
+        rate_hz,
+        max_steps: 10_000_000,
+    };
+    let report = replay_route(&pack, &cfg)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    if let Some(out) = &args.out {
+        std::fs::create_dir_all(out).with_context(|| out.display().to_string())?;
+        let p = out.join("route_report.json");
+        std::fs::write(&p, serde_json::to_string_pretty(&report)?)
+            .with_context(|| p.display().to_string())?;
+    }
+    if report.within_budget {
+        Ok(())
+    } else {
+        Err(BudgetExceeded(format!(
+            "satellite crop worst step {} us over the {} us budget",
+            report.worst_step.1, report.budget_us
+        ))
+        .into())
+    }
 }
 
 /// Slowest sampling rate of a synthetic drive, Hz (below it the frames are kilometres apart).

@@ -163,4 +163,5 @@ pub const fn layout_runtime_bytes() -> usize {
         + layout::POINTS_BYTES
         + layout::MAP_FRAME_BYTES
         + layout::TILE_CACHE_BYTES
+        + layout::TILE_PIXELS_BYTES
 }

@@ -29,6 +29,7 @@ pub mod degraded;
 pub mod error;
 mod replay;
 pub mod report;
+pub mod route_replay;
 mod source;
 pub mod stats;
 pub mod timed_engine;
@@ -43,8 +44,10 @@ pub use assemble::{bundle_config_name, layout_runtime_bytes};
 pub use degraded::DEFAULT_MAX_DEGRADED_SHARE;
 pub use error::{EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError};
 pub use replay::{MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, replay};
+pub use route_replay::{RouteReplayConfig, RouteReplayReport, replay_route};
 
 use crate::eval::MapVector;
+use crate::route_pack_builder::TileCompression;
 use report::Report;
 
 /// Timestamp of the first frame on the virtual clock, microseconds.
@@ -83,6 +86,9 @@ pub struct ReplayConfig {
     pub max_degraded_share: f64,
     /// Draw a progress bar on stderr.
     pub show_progress: bool,
+    /// How the harness stores the tiles of the pack it builds (synthetic drives and scenario
+    /// folders without a pack): raw, or compressed and decoded into the `tile_pixels` region.
+    pub pack_compression: TileCompression,
 }
 
 /// What the pictures of a replay are made from (the last step).

@@ -134,8 +134,17 @@ pub fn replay(
     let engine = TimedEngine::new(engine, frames, alloc);
     let after_engine = stats_of(alloc);
     label(alloc, ArenaRegion::RuntimeRegions);
-    let pack_source =
-        PackSource::from_bytes(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?;
+    // The decoded-tile region, reserved once and only for a compressed pack (raw tiles are
+    // read in place).
+    let mut tile_pixels = vec![
+        0u8;
+        if pack.codec().needs_decode() {
+            layout::TILE_PIXELS_BYTES
+        } else {
+            0
+        }
+    ];
+    let pack_source = PackSource::with_tile_buffer(pack, &mut tile_pixels);
     // A pack whose tiles are too small for the model's crop would fail every crop and run the
     // whole drive degraded: refuse it at load instead.
     pack_source

@@ -81,13 +81,14 @@ impl Source {
     }
 }
 
-fn corridor_options() -> BuildOptions {
+fn corridor_options(cfg: &ReplayConfig) -> BuildOptions {
     // The crop (60 m x 30 m, rotated with the heading) reaches 34 m from the ego; the corridor
     // covers 40 m either side.
     BuildOptions {
         corridor_width_m: 80.0,
         gsd_m: 0.15,
         tile_size_px: 256,
+        compression: cfg.pack_compression,
         ..BuildOptions::default()
     }
 }
@@ -123,7 +124,7 @@ pub(super) fn open_scenario(
                 .map_err(|e| pack(&e))?;
             let mut imagery = RasterImagery::new(drive.satellite(), anchor);
             let built =
-                build_pack(&mut imagery, &route, &corridor_options()).map_err(|e| pack(&e))?;
+                build_pack(&mut imagery, &route, &corridor_options(cfg)).map_err(|e| pack(&e))?;
             Ok((Source::Synthetic(Box::new(drive)), anchor, built.bytes))
         }
         ScenarioInput::Folder(dir) => {
@@ -150,7 +151,7 @@ pub(super) fn open_scenario(
                 let mut tiles =
                     SlippyTiles::open(&dir.join(&s.manifest.tiles_dir), Some(s.manifest.tile_zoom))
                         .map_err(|e| pack(&e))?;
-                build_pack(&mut tiles, &route, &corridor_options())
+                build_pack(&mut tiles, &route, &corridor_options(cfg))
                     .map_err(|e| pack(&e))?
                     .bytes
             };

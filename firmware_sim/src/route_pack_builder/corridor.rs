@@ -16,12 +16,17 @@ use satmap_runtime::route_pack::format::{
     CHANNELS, HEADER_LEN, INDEX_ENTRY_LEN, MAX_ROUTE_POINTS, MAX_TILES, ROUTE_POINT_LEN,
 };
 
+use super::compress::TileCompression;
 use super::error::BuildError;
 use super::options::BuildOptions;
 
 /// Most (segment, tile row) runs the count may hold: 48 MB of runs. A route needs more only
 /// with far more points than tiles (points much closer than a tile side); thin it.
 pub const MAX_CORRIDOR_RUNS: u64 = 4_000_000;
+
+/// The best compression ratio assumed of satellite tiles when sizing a compressed pack before
+/// its imagery is read (JPEG of aerial imagery reaches 8-15:1 at the qualities crops need).
+pub const MAX_COMPRESSION_RATIO: u64 = 32;
 
 /// One run of tiles: row, first and last column.
 type Run = (i32, i32, i32);
@@ -105,13 +110,22 @@ pub fn corridor_tiles(route_m: &[DVec2], opts: &BuildOptions) -> Result<Vec<Tile
     ]
     .into_iter()
     .fold(0u64, u64::saturating_add);
-    if bytes > ROUTE_PACK_BYTES as u64 {
-        return Err(too_large(
-            "bytes",
-            bytes,
+    // A compressed pack's size is known once its tiles are encoded (checked then, in
+    // `build_pack`); before reading imagery only a corridor that could not fit even at
+    // MAX_COMPRESSION_RATIO is refused.
+    let (limit, limit_name) = if opts.compression == TileCompression::Raw {
+        (
             ROUTE_PACK_BYTES as u64,
             "the route_pack region of memory_layout.toml",
-        ));
+        )
+    } else {
+        (
+            (ROUTE_PACK_BYTES as u64).saturating_mul(MAX_COMPRESSION_RATIO),
+            "the route_pack region of memory_layout.toml at the best compression ratio assumed (32:1)",
+        )
+    };
+    if bytes > limit {
+        return Err(too_large("bytes", bytes, limit, limit_name));
     }
     Ok(merged
         .iter()

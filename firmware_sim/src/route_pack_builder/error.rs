@@ -157,6 +157,33 @@ pub enum BuildError {
         /// Where the limit comes from.
         limit_name: &'static str,
     },
+    /// A route point lies farther from the route-frame origin than the frame's tested
+    /// distortion bound covers (`frame::MAX_ROUTE_RADIUS_M`).
+    #[error(
+        "route point {index} is {:.1} km from the route-frame origin, beyond the {:.1} km \
+         within which one route frame keeps the crop within its tested distortion bound; \
+         put the origin at the route's middle (--origin LAT,LON) or split the route",
+        distance_m / 1000.0,
+        max_m / 1000.0
+    )]
+    RouteBeyondFrame {
+        /// Vertex number in the route.
+        index: usize,
+        /// Its distance from the origin in the route frame, metres.
+        distance_m: f64,
+        /// The limit, metres.
+        max_m: f64,
+    },
+    /// A tile payload could not be compressed.
+    #[error("tile ({tile_x}, {tile_y}) could not be compressed: {detail}")]
+    TileEncode {
+        /// Column of the tile.
+        tile_x: i32,
+        /// Row of the tile.
+        tile_y: i32,
+        /// The compressor's message.
+        detail: String,
+    },
     /// Every pack tile was skipped for missing imagery.
     #[error("no pack tile has imagery: nothing to write")]
     Empty,

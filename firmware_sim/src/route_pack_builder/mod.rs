@@ -12,19 +12,32 @@
 //! - [`options`]: [`BuildOptions`] and their checks (ranges, tiles large enough for the crop).
 //! - [`corridor`]: the corridor's tiles, counted and checked against the pack format and the
 //!   `route_pack` region of `memory_layout.toml` before any imagery is read.
+//! - [`frame`]: the route frame: the ground point a pack pixel shows ([`ground_point`]) and the
+//!   farthest a route may reach from the origin ([`MAX_ROUTE_RADIUS_M`], tested distortion
+//!   bound; [`check_route_radius`]).
 //! - [`resample`]: filling the pack tiles from the imagery.
+//! - [`compress`]: the tile codecs of version 2 packs ([`TileCompression`]), each tile decoded
+//!   back by the runtime's decoder before it is written.
 //! - [`error`]: the error enum, [`BuildError`].
+//! - [`synthetic_route`]: a procedural winding road ([`SyntheticRoute`]) and satellite-like
+//!   imagery around it ([`SyntheticRouteImagery`]), for packs of any length without a raster.
 
+pub mod compress;
 pub mod corridor;
 pub mod error;
+pub mod frame;
 pub mod imagery;
 pub mod options;
 pub mod resample;
 pub mod route;
+pub mod synthetic_route;
 
+pub use compress::{DEFAULT_JPEG_QUALITY, TileCompression, compress_tile, psnr_db};
 pub use corridor::{MAX_CORRIDOR_RUNS, corridor_tiles};
 pub use error::BuildError;
+pub use frame::{EARTH_RADIUS_M, MAX_ROUTE_RADIUS_M, check_route_radius, ground_point};
 pub use imagery::{Imagery, SlippyTiles, WorldCrs, WorldFileImage};
 pub use options::{BuildOptions, PAPER_CROP};
 pub use resample::{BuiltPack, build_pack};
 pub use route::{parse_route_geojson, read_route_geojson};
+pub use synthetic_route::{SyntheticRoute, SyntheticRouteImagery};

@@ -2,9 +2,13 @@
 //! tiles large enough for the model's crop.
 
 use satmap_runtime::geo::Geodetic;
-use satmap_runtime::route_pack::{MAX_CROP_TILES, crop_tile_bound};
+use satmap_runtime::capacity::layout::TILE_PIXELS_BYTES;
+use satmap_runtime::route_pack::{
+    MAX_CROP_TILES, PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES, crop_tile_bound,
+};
 use satmap_runtime::satellite::CropSpec;
 
+use super::compress::TileCompression;
 use super::error::BuildError;
 
 /// Largest corridor width, metres.
@@ -42,6 +46,8 @@ pub struct BuildOptions {
     /// `sat_gsd_m`): tiles must be large enough that one crop spans at most the runtime's
     /// `MAX_CROP_TILES`.
     pub crop: CropSpec,
+    /// How tiles are stored: raw (version 1, read in place) or compressed (version 2).
+    pub compression: TileCompression,
 }
 
 impl Default for BuildOptions {
@@ -54,6 +60,7 @@ impl Default for BuildOptions {
             show_progress: false,
             origin: None,
             crop: PAPER_CROP,
+            compression: TileCompression::Raw,
         }
     }
 }
@@ -105,6 +112,11 @@ impl BuildOptions {
         if !(crop.gsd_m.is_finite() && crop.gsd_m > 0.001 && crop.gsd_m <= 100.0) {
             return range("--crop-gsd-m", crop.gsd_m.to_string(), "(0.001, 100] m/px");
         }
+        if let TileCompression::Jpeg { quality } = self.compression
+            && !(1..=100).contains(&quality)
+        {
+            return range("--jpeg-quality", quality.to_string(), "1..=100");
+        }
         let tiles_for = |size: u16| crop_tile_bound(crop, self.gsd_m, size).unwrap_or(usize::MAX);
         let tiles = tiles_for(self.tile_size_px);
         if tiles > MAX_CROP_TILES {
@@ -121,6 +133,18 @@ impl BuildOptions {
                 max_tiles: MAX_CROP_TILES,
                 min_tile_px,
             });
+        }
+        // A compressed pack is decoded into the vehicle's tile buffer: one crop's tiles and a
+        // step's prefetch must fit it at once.
+        let side = usize::from(self.tile_size_px);
+        let slots = (TILE_PIXELS_BYTES / (side * side * 3)).min(TILE_CACHE_TILES);
+        let needed = tiles + PREFETCH_TILES_PER_STEP;
+        if self.compression != TileCompression::Raw && slots < needed {
+            return Err(BuildError::Option(format!(
+                "compressed tiles of {side} px: the tile_pixels region of memory_layout.toml \
+                 ({TILE_PIXELS_BYTES} bytes) holds {slots}, one crop and its prefetch need \
+                 {needed}; use smaller tiles or raw"
+            )));
         }
         Ok(())
     }

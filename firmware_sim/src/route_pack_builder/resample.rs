@@ -9,20 +9,21 @@
 //! [`NODE_STEP_PX`] pixels; pixels in between interpolate the node's source coordinates
 //! bilinearly (the map is smooth: the interpolation error is far below 1e-3 source px).
 
-use glam::{DVec2, DVec3};
+use glam::DVec2;
 use indicatif::{ProgressBar, ProgressStyle};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
+use satmap_runtime::capacity::layout::ROUTE_PACK_BYTES;
 use satmap_runtime::route_pack::{PackHeader, PackTile, TileKey, encode_pack};
 
+use super::compress::{TileCompression, compress_tile, psnr_db};
 use super::corridor::corridor_tiles;
 use super::error::BuildError;
+use super::frame::{check_route_radius, ground_point};
 use super::imagery::{Gap, Imagery};
 use super::options::BuildOptions;
 
 /// Spacing of exactly projected nodes inside a pack tile, pixels.
 pub const NODE_STEP_PX: usize = 16;
-/// Mean Earth radius for the tangent-plane drop, metres.
-const EARTH_RADIUS_M: f64 = 6_371_000.0;
 
 /// A built pack and what went into it.
 #[derive(Clone, Debug)]
@@ -37,6 +38,15 @@ pub struct BuiltPack {
     pub skipped_tiles: usize,
     /// Route length in the route frame, metres.
     pub route_length_m: f64,
+    /// Bytes the tiles would take raw (`tiles * S * S * 3`).
+    pub raw_tile_bytes: u64,
+    /// Bytes the tile payloads take as written.
+    pub payload_bytes: u64,
+    /// PSNR of the decoded tiles against the resampled raw ones, all tiles pooled, dB
+    /// (infinite for raw and lossless packs).
+    pub tile_psnr_db: f64,
+    /// Lowest PSNR of any one tile, dB.
+    pub worst_tile_psnr_db: f64,
 }
 
 /// Build a pack from `imagery` along `route`.
@@ -65,6 +75,8 @@ pub fn build_pack(
         .iter()
         .map(|p| frame.geodetic_to_enu(p).truncate())
         .collect();
+    // Beyond its tested radius the one route frame's distortion is not bounded (frame.rs).
+    check_route_radius(&route_m)?;
     // Sizes first: nothing is read from the imagery for a pack that cannot be written.
     let keys = corridor_tiles(&route_m, opts)?;
     for (index, p) in route.iter().enumerate() {
@@ -91,9 +103,24 @@ pub fn build_pack(
     progress.set_message("resampling");
     let mut payloads: Vec<(TileKey, Vec<u8>)> = Vec::with_capacity(keys.len());
     let mut skipped_tiles = 0;
+    let (mut squared_error, mut worst_tile_psnr_db) = (0u64, f64::INFINITY);
+    let tile_samples = (usize::from(opts.tile_size_px).pow(2) * 3) as u64;
     for key in keys {
         match fill_tile(imagery, &frame, key, opts)? {
-            Ok(rgb) => payloads.push((key, rgb)),
+            Ok(rgb) if opts.compression == TileCompression::Raw => payloads.push((key, rgb)),
+            Ok(rgb) => {
+                let tile = compress_tile(opts.compression, &rgb, opts.tile_size_px).map_err(
+                    |detail| BuildError::TileEncode {
+                        tile_x: key.tile_x,
+                        tile_y: key.tile_y,
+                        detail,
+                    },
+                )?;
+                squared_error += tile.squared_error;
+                worst_tile_psnr_db =
+                    worst_tile_psnr_db.min(psnr_db(tile.squared_error, tile_samples));
+                payloads.push((key, tile.payload));
+            }
             Err((gap, at)) if !opts.allow_missing => {
                 progress.abandon();
                 return Err(imagery.gap_error(&gap, at.lat_deg, at.lon_deg));
@@ -108,7 +135,7 @@ pub fn build_pack(
     }
     let tiles: Vec<PackTile<'_>> = payloads
         .iter()
-        .map(|(key, rgb)| PackTile { key: *key, rgb })
+        .map(|(key, rgb)| PackTile { key: *key, payload: rgb })
         .collect();
     let header = PackHeader {
         tile_size_px: opts.tile_size_px,
@@ -117,8 +144,18 @@ pub fn build_pack(
         corridor_width_m: opts.corridor_width_m,
         tile_count: 0,
         route_point_count: 0,
+        codec: opts.compression.codec(),
     };
     let bytes = encode_pack(&header, &route_m, &tiles)?;
+    if bytes.len() > ROUTE_PACK_BYTES {
+        return Err(BuildError::PackTooLarge {
+            what: "bytes",
+            needed: bytes.len() as u64,
+            limit: ROUTE_PACK_BYTES as u64,
+            limit_name: "the route_pack region of memory_layout.toml",
+        });
+    }
+    let payload_bytes = tiles.iter().map(|t| t.payload.len() as u64).sum();
     let route_length_m = route_m.windows(2).map(|w| w[0].distance(w[1])).sum();
     Ok(BuiltPack {
         bytes,
@@ -126,6 +163,10 @@ pub fn build_pack(
         tiles: tiles.len(),
         skipped_tiles,
         route_length_m,
+        raw_tile_bytes: tiles.len() as u64 * tile_samples,
+        payload_bytes,
+        tile_psnr_db: psnr_db(squared_error, tiles.len() as u64 * tile_samples),
+        worst_tile_psnr_db,
     })
 }
 
@@ -148,11 +189,7 @@ fn fill_tile(
             (f64::from(key.tile_y) * s as f64 + r as f64 + 0.5) * gsd,
         )
     };
-    let drop_m = frame.origin().height_m;
-    let ground = |p: DVec2| {
-        let z_m = -drop_m - p.length_squared() / (2.0 * EARTH_RADIUS_M);
-        frame.enu_to_geodetic(DVec3::new(p.x, p.y, z_m))
-    };
+    let ground = |p: DVec2| ground_point(frame, p);
     let mut grid = Vec::with_capacity(nodes * nodes);
     for nr in 0..nodes {
         for nc in 0..nodes {

@@ -203,7 +203,7 @@ impl LayoutError {
 }
 
 /// Regions the runtime cannot run without.
-pub const REQUIRED_REGIONS: [&str; 13] = [
+pub const REQUIRED_REGIONS: [&str; 14] = [
     "camera_images",
     "value_features",
     "gkt_lut",
@@ -217,6 +217,7 @@ pub const REQUIRED_REGIONS: [&str; 13] = [
     "points",
     "map_frame",
     "tile_cache",
+    "tile_pixels",
 ];
 
 /// Latency budgets the harness checks.

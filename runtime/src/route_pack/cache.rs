@@ -1,13 +1,16 @@
-//! Fixed-capacity cache of verified tiles.
+//! Fixed-capacity cache of verified (and decoded) tiles.
 //!
-//! Tiles stay in the pack image (zero copy, raw RGB), so what the cache keeps is the outcome of
-//! verifying a tile's checksum: a tile is hashed before its first use and again only after it
-//! was evicted. Capacity is [`TILE_CACHE_TILES`] entries (least recently used goes first); it
-//! moves to `memory_layout.toml` once that file defines a tile-cache entry.
+//! Raw tiles (version 1) stay in the pack image (zero copy), so what the cache keeps is the
+//! outcome of verifying a tile's checksum: a tile is hashed before its first use and again only
+//! after it was evicted. Compressed tiles (version 2) are hashed, then decoded into one slot of
+//! the caller's tile buffer (`memory_layout.toml`, `region.tile_pixels`); entry `k` of the
+//! cache owns slot `k`, so the cache holds as many compressed tiles as the buffer has slots (at
+//! most [`TILE_CACHE_TILES`]). Least recently used goes first.
 //!
-//! Work bound: a step verifies at most [`super::MAX_CROP_TILES`] tiles for its crop plus
-//! [`PREFETCH_TILES_PER_STEP`] tiles ahead on the route.
+//! Work bound: a step verifies (and decodes) at most [`super::MAX_CROP_TILES`] tiles for its
+//! crop plus [`PREFETCH_TILES_PER_STEP`] tiles ahead on the route.
 
+use super::codec::decode_tile;
 use super::crop::MAX_CROP_TILES;
 use super::format::RoutePack;
 
@@ -28,6 +31,9 @@ pub enum TileState {
     Verified,
     /// Checksum mismatch: never sample this tile.
     Corrupt,
+    /// Checksum matched but the payload did not decode to the tile (a payload forged with a
+    /// matching checksum, or a builder bug): never sample this tile.
+    Undecodable,
 }
 
 // `memory_layout.toml` budgets 16 bytes per tile-cache entry.
@@ -47,6 +53,8 @@ pub struct TileCache {
     clock: u64,
     verified_this_step: usize,
     verified_total: u64,
+    decoded_this_step: usize,
+    decoded_total: u64,
 }
 
 impl Default for TileCache {
@@ -64,12 +72,38 @@ impl TileCache {
             clock: 0,
             verified_this_step: 0,
             verified_total: 0,
+            decoded_this_step: 0,
+            decoded_total: 0,
         }
     }
 
-    /// Start a step: resets the per-step verification counter.
+    /// Start a step: resets the per-step verification and decode counters.
     pub fn begin_step(&mut self) {
         self.verified_this_step = 0;
+        self.decoded_this_step = 0;
+    }
+
+    /// Tiles decoded since [`Self::begin_step`] (compressed packs only).
+    #[must_use]
+    pub const fn decoded_this_step(&self) -> usize {
+        self.decoded_this_step
+    }
+
+    /// Tiles decoded since the cache was made.
+    #[must_use]
+    pub const fn decoded_total(&self) -> u64 {
+        self.decoded_total
+    }
+
+    /// Entries usable with `pack` and a tile buffer of `pixels_len` bytes: all of them for raw
+    /// packs, one per whole tile slot of the buffer for compressed ones.
+    #[must_use]
+    pub fn capacity(pack: &RoutePack<'_>, pixels_len: usize) -> usize {
+        if pack.codec().needs_decode() {
+            (pixels_len / pack.header().tile_bytes()).min(TILE_CACHE_TILES)
+        } else {
+            TILE_CACHE_TILES
+        }
     }
 
     /// Tiles hashed since [`Self::begin_step`].
@@ -94,46 +128,63 @@ impl TileCache {
             .map(|e| e.state)
     }
 
-    /// State of tile `tile` of `pack`, verifying (hashing) it if it is not cached.
-    pub fn get_or_verify(&mut self, pack: &RoutePack<'_>, tile: usize) -> TileState {
+    /// State of tile `tile` of `pack` and the entry holding it, verifying (hashing) and, for a
+    /// compressed pack, decoding it into that entry's slot of `pixels` if it is not cached.
+    /// `None` when the cache has no entry to give (a compressed pack with a tile buffer smaller
+    /// than one tile, see [`Self::capacity`]).
+    pub fn get_or_verify(
+        &mut self,
+        pack: &RoutePack<'_>,
+        tile: usize,
+        pixels: &mut [u8],
+    ) -> Option<(TileState, usize)> {
+        let capacity = Self::capacity(pack, pixels.len());
+        let entries = self.entries.get_mut(..capacity)?;
         self.clock += 1;
         let clock = self.clock;
-        if let Some(e) = self
-            .entries
+        if let Some((k, e)) = entries
             .iter_mut()
-            .flatten()
-            .find(|e| e.tile as usize == tile)
+            .enumerate()
+            .find_map(|(k, e)| e.as_mut().filter(|e| e.tile as usize == tile).map(|e| (k, e)))
         {
             e.last_used = clock;
-            return e.state;
+            return Some((e.state, k));
         }
-        let state = if pack.verified_tile(tile).is_some() {
-            TileState::Verified
-        } else {
-            TileState::Corrupt
-        };
-        self.verified_this_step += 1;
-        self.verified_total += 1;
-        let Ok(tile) = u32::try_from(tile) else {
-            return state;
-        };
-        let entry = Some(Entry {
-            tile,
-            state,
-            last_used: clock,
-        });
-        let slot = match self.entries.iter().position(Option::is_none) {
+        let slot = match entries.iter().position(Option::is_none) {
             Some(free) => free,
-            None => self
-                .entries
+            None => entries
                 .iter()
                 .enumerate()
                 .min_by_key(|(_, e)| e.map_or(0, |e| e.last_used))
-                .map_or(0, |(i, _)| i),
+                .map(|(i, _)| i)?,
         };
+        let payload = pack.verified_tile(tile);
+        self.verified_this_step += 1;
+        self.verified_total += 1;
+        let state = match payload {
+            None => TileState::Corrupt,
+            Some(_) if !pack.codec().needs_decode() => TileState::Verified,
+            Some(payload) => {
+                self.decoded_this_step += 1;
+                self.decoded_total += 1;
+                let bytes = pack.header().tile_bytes();
+                let out = pixels.get_mut(slot * bytes..(slot + 1) * bytes);
+                match out.map(|out| {
+                    decode_tile(pack.codec(), payload, pack.header().tile_size_px, out)
+                }) {
+                    Some(Ok(())) => TileState::Verified,
+                    _ => TileState::Undecodable,
+                }
+            }
+        };
+        let tile = u32::try_from(tile).ok()?;
         if let Some(dst) = self.entries.get_mut(slot) {
-            *dst = entry;
+            *dst = Some(Entry {
+                tile,
+                state,
+                last_used: clock,
+            });
         }
-        state
+        Some((state, slot))
     }
 }

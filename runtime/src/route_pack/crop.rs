@@ -1,6 +1,7 @@
 //! The ego-centred crop: [`PackSource`] samples the pack under the crop window of
 //! `ARCHITECTURE.md` ("Ego pose, satellite crop geometry"), bilinear and continuous across tile
-//! seams, and prefetches tiles ahead along the route.
+//! seams, and prefetches (verifies and, for compressed packs, decodes) tiles ahead along the
+//! route.
 //!
 //! Crop pixel `(r, c)` samples ego point `x_e = x_min + (c + 0.5) gsd`, `y_e = y_min + (r + 0.5)
 //! gsd`, at route point `position + x_e (sin yaw, -cos yaw) + y_e (cos yaw, sin yaw)`. In pack
@@ -47,6 +48,14 @@ pub enum CropFault {
         /// Tiles in the crop's bounding box.
         tiles: usize,
     },
+    /// A compressed pack's tile buffer has fewer tile slots than a crop (plus the step's
+    /// prefetch) needs.
+    TileBuffer {
+        /// Whole tile slots in the buffer.
+        slots: usize,
+        /// Slots needed.
+        needed: usize,
+    },
 }
 
 /// What one crop delivered.
@@ -67,6 +76,8 @@ pub struct CropReport {
     pub verified_tiles: u8,
     /// Of those, hashed ahead on the route.
     pub prefetched_tiles: u8,
+    /// Tiles decoded this step (compressed packs: every tile hashed is then decoded).
+    pub decoded_tiles: u8,
     /// Set when the crop could not be attempted.
     pub fault: Option<CropFault>,
     /// Where the route cursor stands after this step (not moved on a fault).
@@ -85,6 +96,7 @@ impl CropReport {
         first_corrupt: None,
         verified_tiles: 0,
         prefetched_tiles: 0,
+        decoded_tiles: 0,
         fault: None,
         route: RouteState::Searching,
         route_segments_examined: 0,
@@ -105,6 +117,15 @@ enum Slot<'a> {
     Missing,
     Corrupt(TileKey),
     Ready(&'a [u8]),
+}
+
+/// Where a crop tile's pixels are, once verified: in the pack image or in a decoded slot.
+#[derive(Clone, Copy, Debug)]
+enum Resolved<'a> {
+    Missing,
+    Corrupt(TileKey),
+    InPack(&'a [u8]),
+    Decoded(usize),
 }
 
 /// The pack tiles under one crop, resolved and verified once per step so the pixel loop only
@@ -185,24 +206,45 @@ fn blend(a: u8, b: u8, c: u8, d: u8, fx: u64, fy: u64) -> u8 {
 }
 
 /// The pack-backed satellite source: crop, coverage, tile cache and route-ahead prefetch.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct PackSource<'a> {
     pack: RoutePack<'a>,
     cache: TileCache,
     route: RouteCursor,
     last: CropReport,
+    /// Decoded tile slots of a compressed pack (`region.tile_pixels`); empty for raw packs.
+    pixels: &'a mut [u8],
 }
 
 impl<'a> PackSource<'a> {
-    /// A source over a validated pack.
+    /// A source over a validated pack whose tiles are read in place (version 1, raw). A
+    /// compressed pack needs [`Self::with_tile_buffer`]: without one every crop faults with
+    /// [`CropFault::TileBuffer`] (and [`Self::check_crop_spec`] says so at load).
     #[must_use]
-    pub const fn new(pack: RoutePack<'a>) -> Self {
+    pub fn new(pack: RoutePack<'a>) -> Self {
+        Self::with_tile_buffer(pack, &mut [])
+    }
+
+    /// A source over a validated pack with `pixels` as the buffer compressed tiles are decoded
+    /// into: whole slots of `tile_size_px^2 * 3` bytes, at most [`super::TILE_CACHE_TILES`]
+    /// used (the rest of the buffer is left alone). The caller places it (the
+    /// `tile_pixels` region of `memory_layout.toml`); raw packs never touch it.
+    #[must_use]
+    pub fn with_tile_buffer(pack: RoutePack<'a>, pixels: &'a mut [u8]) -> Self {
         Self {
             pack,
             cache: TileCache::new(),
             route: RouteCursor::new(),
             last: CropReport::EMPTY,
+            pixels,
         }
+    }
+
+    /// Tile slots this source can hold decoded at once (the tile cache's capacity for raw
+    /// packs).
+    #[must_use]
+    pub fn tile_slots(&self) -> usize {
+        TileCache::capacity(&self.pack, self.pixels.len())
     }
 
     /// Validate `bytes` as a pack (in place) and make a source over it.
@@ -253,14 +295,26 @@ impl<'a> PackSource<'a> {
     ///
     /// # Errors
     /// [`CropFault::BadSpec`] for a spec the sampler refuses, [`CropFault::TooManyTiles`] with
-    /// the worst-case tile count ([`crop_tile_bound`]) when it exceeds [`MAX_CROP_TILES`].
+    /// the worst-case tile count ([`crop_tile_bound`]) when it exceeds [`MAX_CROP_TILES`],
+    /// [`CropFault::TileBuffer`] when a compressed pack's tile buffer cannot hold that many
+    /// tiles plus a step's prefetch.
     pub fn check_crop_spec(&self, spec: &CropSpec) -> Result<(), CropFault> {
         let header = self.pack.header();
-        match crop_tile_bound(spec, header.gsd_m, header.tile_size_px) {
-            None => Err(CropFault::BadSpec),
-            Some(tiles) if tiles > MAX_CROP_TILES => Err(CropFault::TooManyTiles { tiles }),
-            Some(_) => Ok(()),
+        let tiles = match crop_tile_bound(spec, header.gsd_m, header.tile_size_px) {
+            None => return Err(CropFault::BadSpec),
+            Some(tiles) if tiles > MAX_CROP_TILES => {
+                return Err(CropFault::TooManyTiles { tiles });
+            }
+            Some(tiles) => tiles,
+        };
+        let needed = tiles + PREFETCH_TILES_PER_STEP;
+        if self.pack.codec().needs_decode() && self.tile_slots() < needed {
+            return Err(CropFault::TileBuffer {
+                slots: self.tile_slots(),
+                needed,
+            });
         }
+        Ok(())
     }
 
     /// Report of the last crop.
@@ -297,6 +351,7 @@ impl<'a> PackSource<'a> {
         }
         report.route = self.route.state();
         report.verified_tiles = sat_u8(self.cache.verified_this_step());
+        report.decoded_tiles = sat_u8(self.cache.decoded_this_step());
         report.coverage = if report.corrupt_tiles > 0 {
             Coverage::Corrupt
         } else if report.fault.is_none() && report.covered_px == report.total_px {
@@ -357,14 +412,16 @@ impl<'a> PackSource<'a> {
         if tiles > MAX_CROP_TILES {
             return Err(CropFault::TooManyTiles { tiles });
         }
-        let mut window = TileWindow {
-            slots: [Slot::Missing; MAX_CROP_TILES],
-            cols,
-            rows,
-            shift: size_px.trailing_zeros(),
-            size_px,
-        };
-        for (k, slot) in window.slots.iter_mut().take(tiles).enumerate() {
+        // Every tile of the window must stay decoded while the pixels are sampled.
+        if self.pack.codec().needs_decode() && tiles > self.tile_slots() {
+            return Err(CropFault::TileBuffer {
+                slots: self.tile_slots(),
+                needed: tiles,
+            });
+        }
+        // Resolve (verify, decode) first, then borrow the decoded slots for sampling.
+        let mut resolved = [Resolved::Missing; MAX_CROP_TILES];
+        for (k, slot) in resolved.iter_mut().take(tiles).enumerate() {
             let (col, row) = (k as i64 % cols, k as i64 / cols);
             let (Ok(tx), Ok(ty)) = (i32::try_from(tile_x0 + col), i32::try_from(tile_y0 + row))
             else {
@@ -374,12 +431,34 @@ impl<'a> PackSource<'a> {
             let Some(i) = self.pack.find_tile(key) else {
                 continue;
             };
-            *slot = match (
-                self.cache.get_or_verify(&self.pack, i),
-                self.pack.tile_payload_unverified(i),
-            ) {
-                (TileState::Verified, Some(px)) => Slot::Ready(px),
-                _ => Slot::Corrupt(key),
+            *slot = match self.cache.get_or_verify(&self.pack, i, self.pixels) {
+                Some((TileState::Verified, at)) if self.pack.codec().needs_decode() => {
+                    Resolved::Decoded(at)
+                }
+                Some((TileState::Verified, _)) => self
+                    .pack
+                    .tile_payload_unverified(i)
+                    .map_or(Resolved::Corrupt(key), Resolved::InPack),
+                _ => Resolved::Corrupt(key),
+            };
+        }
+        let tile_bytes = self.pack.header().tile_bytes();
+        let pixels: &[u8] = self.pixels;
+        let mut window = TileWindow {
+            slots: [Slot::Missing; MAX_CROP_TILES],
+            cols,
+            rows,
+            shift: size_px.trailing_zeros(),
+            size_px,
+        };
+        for (slot, r) in window.slots.iter_mut().zip(resolved) {
+            *slot = match r {
+                Resolved::Missing => Slot::Missing,
+                Resolved::Corrupt(key) => Slot::Corrupt(key),
+                Resolved::InPack(px) => Slot::Ready(px),
+                Resolved::Decoded(at) => pixels
+                    .get(at * tile_bytes..(at + 1) * tile_bytes)
+                    .map_or(Slot::Missing, Slot::Ready),
             };
         }
         // Window-relative pack pixel coordinates in 32.32 fixed point.
@@ -485,7 +564,7 @@ impl<'a> PackSource<'a> {
                     continue;
                 };
                 if self.cache.peek(i).is_none() {
-                    self.cache.get_or_verify(&self.pack, i);
+                    self.cache.get_or_verify(&self.pack, i, self.pixels);
                 }
             }
         }

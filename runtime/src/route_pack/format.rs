@@ -1,24 +1,32 @@
 //! The pack image: constants of the byte layout (`FORMAT.md`), the zero-copy parser that
-//! validates header and index at load, and per-tile access and verification.
-
-use core::fmt;
+//! validates header and index at load (versions 1 and 2), and per-tile access and
+//! verification.
 
 use glam::{DVec2, DVec3};
 use xxhash_rust::xxh3::xxh3_64;
 
+use super::codec::TileCodec;
+pub use super::error::PackError;
 use crate::geo::{EnuFrame, Geodetic};
 use crate::pose::EgoPose;
 
 /// First 8 bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"SMRPACK\0";
-/// The format version this runtime reads and writes.
-pub const VERSION: u16 = 1;
+/// The newest format version: compressed tile payloads with per-tile offsets. The writer uses
+/// it for every codec but [`TileCodec::Raw`].
+pub const VERSION: u16 = 2;
+/// The first format version: raw RGB payloads of fixed size, still read, and written for
+/// [`TileCodec::Raw`] packs.
+pub const VERSION_1: u16 = 1;
 /// Header size, bytes.
 pub const HEADER_LEN: usize = 80;
 /// Bytes per route polyline point (x_m, y_m as f64).
 pub const ROUTE_POINT_LEN: usize = 16;
-/// Bytes per tile index entry (tile_x i32, tile_y i32, xxh3 u64).
+/// Bytes per tile index entry of version 1 (tile_x i32, tile_y i32, xxh3 u64).
 pub const INDEX_ENTRY_LEN: usize = 16;
+/// Bytes per tile index entry of version 2 (tile_x i32, tile_y i32, payload offset u64,
+/// payload length u32, reserved u32, xxh3 u64).
+pub const INDEX_ENTRY_V2_LEN: usize = 32;
 /// Colour channels per pixel (RGB).
 pub const CHANNELS: usize = 3;
 /// Smallest accepted tile side, pixels (sides are powers of two).
@@ -36,7 +44,8 @@ const OFF_VERSION: usize = 8;
 const OFF_HEADER_LEN: usize = 10;
 const OFF_TILE_SIZE: usize = 12;
 const OFF_CHANNELS: usize = 14;
-const OFF_RESERVED: usize = 15;
+/// Version 1: reserved, 0. Version 2: the tile codec ([`TileCodec::code`]).
+const OFF_CODEC: usize = 15;
 const OFF_ORIGIN_LAT: usize = 16;
 const OFF_ORIGIN_LON: usize = 24;
 const OFF_ORIGIN_HEIGHT: usize = 32;
@@ -49,108 +58,6 @@ pub(crate) const OFF_INDEX_XXH3: usize = 64;
 /// Offset of the header checksum (covers bytes `[0, OFF_HEADER_XXH3)`).
 pub(crate) const OFF_HEADER_XXH3: usize = 72;
 
-/// Why a pack image was rejected at load (or could not be written).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
-pub enum PackError {
-    /// The image is shorter than the header.
-    TooShort {
-        /// Bytes given.
-        len: usize,
-    },
-    /// The first 8 bytes are not [`MAGIC`].
-    BadMagic,
-    /// A version this runtime does not read.
-    UnsupportedVersion {
-        /// Version in the header.
-        version: u16,
-    },
-    /// `header_len` is not [`HEADER_LEN`].
-    BadHeaderLen {
-        /// Value in the header.
-        header_len: u16,
-    },
-    /// The header checksum does not match: the header is damaged.
-    HeaderChecksum,
-    /// A header field breaks its rule in `FORMAT.md`.
-    BadField {
-        /// Field name as in `FORMAT.md`.
-        field: &'static str,
-    },
-    /// The image length is not what the header's counts imply.
-    LengthMismatch {
-        /// Bytes given.
-        len: usize,
-        /// Bytes the header implies (saturated at `usize::MAX`).
-        expected: usize,
-    },
-    /// The route + index checksum does not match: route or index damaged.
-    IndexChecksum,
-    /// A route point is not finite.
-    RouteNotFinite {
-        /// Point number.
-        point: u32,
-    },
-    /// Index entries are not strictly increasing in (tile_y, tile_x).
-    IndexNotSorted {
-        /// Entry number of the first entry out of order.
-        entry: u32,
-    },
-    /// Writer: a tile payload does not hold `tile_size_px^2 * 3` bytes.
-    TilePayloadSize {
-        /// Entry number (after sorting).
-        entry: u32,
-    },
-}
-
-impl fmt::Display for PackError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::TooShort { len } => {
-                write!(
-                    f,
-                    "route pack of {len} bytes is shorter than its {HEADER_LEN}-byte header"
-                )
-            }
-            Self::BadMagic => f.write_str("not a route pack (bad magic)"),
-            Self::UnsupportedVersion { version } => {
-                write!(
-                    f,
-                    "route pack version {version} is not supported (expected {VERSION})"
-                )
-            }
-            Self::BadHeaderLen { header_len } => {
-                write!(
-                    f,
-                    "route pack header_len {header_len} (expected {HEADER_LEN})"
-                )
-            }
-            Self::HeaderChecksum => f.write_str("route pack header checksum mismatch"),
-            Self::BadField { field } => write!(f, "route pack header field `{field}` is invalid"),
-            Self::LengthMismatch { len, expected } => {
-                write!(
-                    f,
-                    "route pack is {len} bytes, its header implies {expected}"
-                )
-            }
-            Self::IndexChecksum => f.write_str("route pack route/index checksum mismatch"),
-            Self::RouteNotFinite { point } => {
-                write!(f, "route pack route point {point} is not finite")
-            }
-            Self::IndexNotSorted { entry } => {
-                write!(
-                    f,
-                    "route pack tile index entry {entry} is out of order or duplicated"
-                )
-            }
-            Self::TilePayloadSize { entry } => {
-                write!(f, "route pack tile {entry} payload has the wrong size")
-            }
-        }
-    }
-}
-
-impl core::error::Error for PackError {}
 
 /// A tile's position in the pack grid (see `FORMAT.md`). Ordered by `(tile_y, tile_x)`, the
 /// index order.
@@ -185,6 +92,8 @@ pub struct PackHeader {
     pub tile_count: u32,
     /// Points of the route polyline.
     pub route_point_count: u32,
+    /// How tile payloads are stored ([`TileCodec::Raw`] for version 1).
+    pub codec: TileCodec,
 }
 
 impl PackHeader {
@@ -198,6 +107,34 @@ impl PackHeader {
     #[must_use]
     pub fn tile_side_m(&self) -> f64 {
         f64::from(self.tile_size_px) * self.gsd_m
+    }
+
+    /// Longest compressed payload a version 2 pack may hold for one tile, bytes: twice the raw
+    /// tile, room for a JPEG of pure noise at quality 100 or a deflate stream of incompressible
+    /// bytes, and a bound on what one tile's decode reads.
+    #[must_use]
+    pub fn max_payload_len(&self) -> usize {
+        2 * self.tile_bytes()
+    }
+
+    /// The format version this header is written as: 1 for raw tiles, 2 for compressed.
+    #[must_use]
+    pub const fn version(&self) -> u16 {
+        if self.codec.needs_decode() {
+            VERSION
+        } else {
+            VERSION_1
+        }
+    }
+
+    /// Bytes of one tile index entry in this header's version.
+    #[must_use]
+    pub const fn index_entry_len(&self) -> usize {
+        if self.codec.needs_decode() {
+            INDEX_ENTRY_V2_LEN
+        } else {
+            INDEX_ENTRY_LEN
+        }
     }
 
     /// Check every field rule of `FORMAT.md`.
@@ -232,15 +169,18 @@ impl PackHeader {
         Ok(())
     }
 
-    /// Total image length the header implies, or `None` on overflow.
-    pub(crate) fn image_len(&self) -> Option<usize> {
+    /// Length of header, route and index, or `None` on overflow.
+    pub(crate) fn meta_len(&self) -> Option<usize> {
         let route = (self.route_point_count as usize).checked_mul(ROUTE_POINT_LEN)?;
-        let index = (self.tile_count as usize).checked_mul(INDEX_ENTRY_LEN)?;
+        let index = (self.tile_count as usize).checked_mul(self.index_entry_len())?;
+        HEADER_LEN.checked_add(route)?.checked_add(index)
+    }
+
+    /// Total image length of a version 1 header (raw tiles of fixed size), or `None` on
+    /// overflow. Version 2 lengths follow from the index.
+    pub(crate) fn raw_image_len(&self) -> Option<usize> {
         let tiles = (self.tile_count as usize).checked_mul(self.tile_bytes())?;
-        HEADER_LEN
-            .checked_add(route)?
-            .checked_add(index)?
-            .checked_add(tiles)
+        self.meta_len()?.checked_add(tiles)
     }
 }
 
@@ -274,6 +214,7 @@ pub struct RoutePack<'a> {
     index: &'a [u8],
     payloads: &'a [u8],
     tile_bytes: usize,
+    entry_len: usize,
 }
 
 impl<'a> RoutePack<'a> {
@@ -291,7 +232,7 @@ impl<'a> RoutePack<'a> {
             return Err(PackError::BadMagic);
         }
         let version = read_u16(head, OFF_VERSION);
-        if version != VERSION {
+        if version != VERSION && version != VERSION_1 {
             return Err(PackError::UnsupportedVersion { version });
         }
         let header_len = read_u16(head, OFF_HEADER_LEN);
@@ -307,9 +248,15 @@ impl<'a> RoutePack<'a> {
         if head.get(OFF_CHANNELS).copied() != Some(CHANNELS as u8) {
             return Err(PackError::BadField { field: "channels" });
         }
-        if head.get(OFF_RESERVED).copied() != Some(0) {
-            return Err(PackError::BadField { field: "reserved" });
-        }
+        let code = head.get(OFF_CODEC).copied().unwrap_or(u8::MAX);
+        let codec = match (version, TileCodec::from_code(code)) {
+            (VERSION_1, _) if code != 0 => return Err(PackError::BadField { field: "reserved" }),
+            (VERSION_1, _) => TileCodec::Raw,
+            (_, None) => return Err(PackError::UnsupportedCodec { codec: code }),
+            // Raw tiles are version 1: one layout per codec keeps the reader's cases few.
+            (_, Some(TileCodec::Raw)) => return Err(PackError::BadField { field: "codec" }),
+            (_, Some(codec)) => codec,
+        };
         let header = PackHeader {
             tile_size_px: read_u16(head, OFF_TILE_SIZE),
             origin: Geodetic::new(
@@ -321,18 +268,28 @@ impl<'a> RoutePack<'a> {
             corridor_width_m: read_f64(head, OFF_CORRIDOR),
             tile_count: read_u32(head, OFF_TILE_COUNT),
             route_point_count: read_u32(head, OFF_ROUTE_COUNT),
+            codec,
         };
         header.validate()?;
-        let expected = header.image_len().unwrap_or(usize::MAX);
-        if bytes.len() != expected {
+        // Version 1 knows its length from the header alone; version 2 at least needs its
+        // index, and its exact length is checked against the index below.
+        let expected = match codec {
+            TileCodec::Raw => header.raw_image_len(),
+            _ => header.meta_len(),
+        }
+        .unwrap_or(usize::MAX);
+        let length_ok = match codec {
+            TileCodec::Raw => bytes.len() == expected,
+            _ => bytes.len() >= expected,
+        };
+        if !length_ok {
             return Err(PackError::LengthMismatch {
                 len: bytes.len(),
                 expected,
             });
         }
         let route_len = header.route_point_count as usize * ROUTE_POINT_LEN;
-        let index_len = header.tile_count as usize * INDEX_ENTRY_LEN;
-        let meta_end = HEADER_LEN + route_len + index_len;
+        let meta_end = header.meta_len().unwrap_or(usize::MAX);
         let meta = bytes
             .get(HEADER_LEN..meta_end)
             .ok_or(PackError::IndexChecksum)?;
@@ -351,7 +308,11 @@ impl<'a> RoutePack<'a> {
             index,
             payloads,
             tile_bytes: header.tile_bytes(),
+            entry_len: header.index_entry_len(),
         };
+        if codec.needs_decode() {
+            pack.check_payload_layout(bytes.len())?;
+        }
         for point in 0..header.route_point_count {
             if !pack
                 .route_point(point as usize)
@@ -403,23 +364,74 @@ impl<'a> RoutePack<'a> {
         ))
     }
 
+    /// How tile payloads are stored.
+    #[must_use]
+    pub const fn codec(&self) -> TileCodec {
+        self.header.codec
+    }
+
+    /// Offset of index entry `i` in the index, if it exists.
+    fn entry(&self, i: usize) -> Option<usize> {
+        let off = i.checked_mul(self.entry_len)?;
+        self.index.get(off..off.checked_add(self.entry_len)?)?;
+        Some(off)
+    }
+
     /// Grid position of tile `i` (index order).
     #[must_use]
     pub fn tile_key(&self, i: usize) -> Option<TileKey> {
-        let off = i.checked_mul(INDEX_ENTRY_LEN)?;
-        self.index.get(off..off + INDEX_ENTRY_LEN)?;
+        let off = self.entry(i)?;
         Some(TileKey::new(
             read_i32(self.index, off),
             read_i32(self.index, off + 4),
         ))
     }
 
-    /// Stored checksum of tile `i`.
+    /// Stored checksum of tile `i` (of its payload as stored: compressed in version 2).
     #[must_use]
     pub fn tile_checksum(&self, i: usize) -> Option<u64> {
-        let off = i.checked_mul(INDEX_ENTRY_LEN)?;
-        self.index.get(off..off + INDEX_ENTRY_LEN)?;
-        Some(read_u64(self.index, off + 8))
+        let off = self.entry(i)?;
+        let at = if self.codec().needs_decode() { 24 } else { 8 };
+        Some(read_u64(self.index, off + at))
+    }
+
+    /// Byte range of tile `i`'s payload inside the payload section.
+    fn payload_range(&self, i: usize) -> Option<(usize, usize)> {
+        if !self.codec().needs_decode() {
+            let start = i.checked_mul(self.tile_bytes)?;
+            return Some((start, start.checked_add(self.tile_bytes)?));
+        }
+        let off = self.entry(i)?;
+        let start = usize::try_from(read_u64(self.index, off + 8)).ok()?;
+        let len = read_u32(self.index, off + 16) as usize;
+        Some((start, start.checked_add(len)?))
+    }
+
+    /// Version 2: payloads back to back in index order from the payload section's start,
+    /// each 1..=`max_payload_len` bytes, the last ending at the image's end, reserved words 0.
+    fn check_payload_layout(&self, image_len: usize) -> Result<(), PackError> {
+        let mut next = 0usize;
+        for entry in 0..self.header.tile_count {
+            let bad = PackError::PayloadLayout { entry };
+            let off = self.entry(entry as usize).ok_or(bad)?;
+            let (start, end) = self.payload_range(entry as usize).ok_or(bad)?;
+            let len = end - start;
+            if start != next
+                || len == 0
+                || len > self.header.max_payload_len()
+                || read_u32(self.index, off + 20) != 0
+            {
+                return Err(bad);
+            }
+            next = end;
+        }
+        if next != self.payloads.len() {
+            return Err(PackError::LengthMismatch {
+                len: image_len,
+                expected: (image_len - self.payloads.len()).saturating_add(next),
+            });
+        }
+        Ok(())
     }
 
     /// Index of the tile at `key`, by binary search.
@@ -437,15 +449,17 @@ impl<'a> RoutePack<'a> {
         None
     }
 
-    /// Payload of tile `i` **without** verification (for tools and tests; the crop only reads
-    /// tiles through the verifying cache).
+    /// Payload of tile `i` as stored (raw RGB in version 1, compressed in version 2),
+    /// **without** verification (for tools and tests; the crop only reads tiles through the
+    /// verifying cache).
     #[must_use]
     pub fn tile_payload_unverified(&self, i: usize) -> Option<&'a [u8]> {
-        let off = i.checked_mul(self.tile_bytes)?;
-        self.payloads.get(off..off.checked_add(self.tile_bytes)?)
+        let (start, end) = self.payload_range(i)?;
+        self.payloads.get(start..end)
     }
 
-    /// Payload of tile `i` if its checksum matches, else `None` (missing or corrupt).
+    /// Payload of tile `i` as stored if its checksum matches, else `None` (missing or
+    /// corrupt).
     #[must_use]
     pub fn verified_tile(&self, i: usize) -> Option<&'a [u8]> {
         let payload = self.tile_payload_unverified(i)?;
@@ -461,8 +475,14 @@ impl<'a> RoutePack<'a> {
     /// Route-frame pose of a WGS84 fix with a compass heading (degrees clockwise from true
     /// north at the fix). The heading is carried into the route frame exactly (meridian
     /// convergence included), by mapping a point 10 m ahead.
+    ///
+    /// The fix's height is not used: pack pixels show ground points near the ellipsoid
+    /// (`FORMAT.md`, "Route frame"), and the ENU plane is not level away from its origin, so a
+    /// fix's height would move its plane position radially by `height * sin(d / R)` (2.4 m for a
+    /// fix 300 m up, 50 km from the origin). The fix is taken at height 0 instead.
     #[must_use]
     pub fn pose_from_wgs84(&self, fix: &Geodetic, heading_deg: f64) -> EgoPose {
+        let fix = &Geodetic::new(fix.lat_deg, fix.lon_deg, 0.0);
         let here = self.frame.geodetic_to_enu(fix);
         let (sin_h, cos_h) = libm::sincos(heading_deg.to_radians());
         let ahead =

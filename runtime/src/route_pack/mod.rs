@@ -28,13 +28,16 @@
 //! --bench pack_build`).
 
 pub mod cache;
+pub mod codec;
 pub mod crop;
 pub mod crop_bound;
+pub mod error;
 pub mod format;
 pub mod route;
 pub mod writer;
 
-pub use cache::{PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES};
+pub use cache::{PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES, TileState};
+pub use codec::{DecodeFault, TileCodec, decode_tile};
 pub use crop::{CropFault, CropReport, FILL_RGB, MAX_CROP_TILES, PackSource};
 pub use crop_bound::crop_tile_bound;
 pub use format::{PackError, PackHeader, RoutePack, TileKey};

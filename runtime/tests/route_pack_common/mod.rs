@@ -5,7 +5,9 @@
 use glam::DVec2;
 use satmap_runtime::geo::Geodetic;
 use satmap_runtime::pose::EgoPose;
-use satmap_runtime::route_pack::{PackHeader, PackSource, PackTile, TileKey, encode_pack};
+use satmap_runtime::route_pack::{
+    PackHeader, PackSource, PackTile, TileCodec, TileKey, encode_pack,
+};
 use satmap_runtime::satellite::CropSpec;
 
 /// Encode a pack whose tile `(tx, ty)` pixel `(row r, col c)` is `paint(tx * S + c, ty * S + r)`.
@@ -31,7 +33,7 @@ pub fn draw_pack(
         .collect();
     let tiles: Vec<PackTile<'_>> = payloads
         .iter()
-        .map(|(key, rgb)| PackTile { key: *key, rgb })
+        .map(|(key, rgb)| PackTile { key: *key, payload: rgb })
         .collect();
     let header = PackHeader {
         tile_size_px,
@@ -40,6 +42,7 @@ pub fn draw_pack(
         corridor_width_m: 20.0,
         tile_count: 0,
         route_point_count: 0,
+        codec: TileCodec::Raw,
     };
     encode_pack(&header, route, &tiles).unwrap()
 }
