@@ -60,6 +60,9 @@ pub struct RouteReplayReport {
     pub budget_us: u64,
     /// Whether the slowest step stayed within it.
     pub within_budget: bool,
+    /// XXH3-64 over every crop's bytes in order: equal for two packs whose crops are equal
+    /// (a raw and a lossless pack of the same imagery), and across runs.
+    pub crop_digest: u64,
 }
 
 impl RouteReplayReport {
@@ -91,11 +94,12 @@ impl RouteReplayReport {
             if self.within_budget { "ok" } else { "EXCEEDED" }
         );
         s += &format!(
-            "  tiles decoded {} (at most {} a step), route segments examined at most {} a step, steps not fully covered {}\n",
+            "  tiles decoded {} (at most {} a step), route segments examined at most {} a step, steps not fully covered {}, crop digest {:016x}\n",
             self.decoded_tiles,
             self.max_decoded_per_step,
             self.max_route_segments_per_step,
-            self.not_full_steps
+            self.not_full_steps,
+            self.crop_digest
         );
         s
     }
@@ -151,6 +155,7 @@ pub fn replay_route(
         Series::with_capacity(steps),
     );
     let mut worst = (0, 0, 0);
+    let mut digest = xxhash_rust::xxh3::Xxh3::new();
     let (mut decoded, mut max_decoded, mut max_segments, mut not_full) = (0u64, 0u8, 0u32, 0);
     let (mut seg, mut seg_start_m) = (0usize, 0.0f64);
     for k in 0..steps {
@@ -173,6 +178,7 @@ pub fn replay_route(
         let started = Instant::now();
         let report = source.crop_with_report(&pose, &cfg.crop, &mut crop);
         let us = started.elapsed().as_micros() as u64;
+        digest.update(&crop);
         all.record(us);
         if report.decoded_tiles > 0 {
             with.record(us);
@@ -213,5 +219,6 @@ pub fn replay_route(
         not_full_steps: not_full,
         budget_us,
         within_budget: worst.1 <= budget_us,
+        crop_digest: digest.digest(),
     })
 }

@@ -18,7 +18,7 @@
 
 use std::f64::consts::{PI, TAU};
 
-use glam::{DVec2, DVec3, Vec3A, Vec4};
+use glam::{DVec2, DVec3, Vec2, Vec3A, Vec4};
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use satmap_runtime::geo::{EnuFrame, Geodetic};
@@ -39,11 +39,11 @@ pub const ROAD_WIDTH_M: f64 = 7.0;
 /// Beyond this distance from the start, as a fraction of the length, arcs turn homewards.
 pub const HOME_FRACTION: f64 = 0.3;
 /// Side of a cell of the road's segment grid, metres.
-pub const CELL_M: f64 = 32.0;
+pub const CELL_M: f64 = 16.0;
 
 /// Distance from the centre line up to which the road (and its verge) is drawn, metres; the
 /// segment grid lists every segment within this distance of a cell.
-const ROAD_REACH_M: f64 = 12.0;
+const ROAD_REACH_M: f64 = 9.0;
 /// Share of pieces that are straights (while not homing).
 const STRAIGHT_SHARE: f64 = 0.35;
 /// Mean Earth radius of the builder's tangent-plane drop, metres (`resample.rs`).
@@ -483,7 +483,8 @@ pub const DEFAULT_PIXEL_M: f64 = 0.15;
 #[derive(Clone, Copy)]
 struct FieldSites {
     cell: Option<(i32, i32)>,
-    sites: [DVec2; 9],
+    /// Relative to the cell's corner, cells.
+    sites: [Vec2; 9],
     hashes: [u32; 9],
     rows: [DVec2; 9],
 }
@@ -573,7 +574,7 @@ impl<'a> SyntheticRouteImagery<'a> {
             road_range: route.grid.cell(road_cell.0, road_cell.1),
             fields: FieldSites {
                 cell: None,
-                sites: [DVec2::ZERO; 9],
+                sites: [Vec2::ZERO; 9],
                 hashes: [0; 9],
                 rows: [DVec2::ZERO; 9],
             },
@@ -619,9 +620,9 @@ impl<'a> SyntheticRouteImagery<'a> {
                 let h = hash2(salt, cx, cy);
                 let h2 = remix(h);
                 let hash = remix(h2);
-                self.fields.sites[k] = DVec2::new(
-                    f64::from(cx) + 0.1 + 0.8 * unit(h),
-                    f64::from(cy) + 0.1 + 0.8 * unit(h2),
+                self.fields.sites[k] = Vec2::new(
+                    (k % 3) as f32 - 1.0 + 0.1 + 0.8 * unit(h) as f32,
+                    (k / 3) as f32 - 1.0 + 0.1 + 0.8 * unit(h2) as f32,
                 );
                 let r = remix(hash);
                 let spacing_m = 1.2 + 2.5 * unit(r);
@@ -630,10 +631,13 @@ impl<'a> SyntheticRouteImagery<'a> {
             }
             self.fields.cell = Some(cell);
         }
-        let (mut d1, mut d2) = (f64::INFINITY, f64::INFINITY);
+        // In f32 about the cell's corner (sites within 2 cells of it).
+        let base = DVec2::new(f64::from(cell.0), f64::from(cell.1));
+        let local = (g - base).as_vec2();
+        let (mut d1, mut d2) = (f32::INFINITY, f32::INFINITY);
         let (mut i1, mut i2) = (0, 0);
         for (k, site) in self.fields.sites.iter().enumerate() {
-            let d = (g - *site).length_squared();
+            let d = (local - *site).length_squared();
             if d < d1 {
                 (d2, i2) = (d1, i1);
                 (d1, i1) = (d, k);
@@ -645,7 +649,7 @@ impl<'a> SyntheticRouteImagery<'a> {
         let gap = (self.fields.sites[i2] - self.fields.sites[i1]).length();
         FieldAt {
             hash: self.fields.hashes[i1],
-            edge_m: ((d2 - d1) / (2.0 * gap.max(1e-9)) * FIELD_CELL_M) as f32,
+            edge_m: (d2 - d1) / (2.0 * gap.max(1e-6)) * FIELD_CELL_M as f32,
             rows: self.fields.rows[i1],
         }
     }
@@ -740,7 +744,7 @@ impl<'a> SyntheticRouteImagery<'a> {
         let density = 0.55 * trees_big + 0.45 * trees_small + kind.trees - 0.12
             + 0.18 * smoothstep(8.0, 1.0, field.edge_m)
             + Vec3A::new(0.0, 0.08, 0.05).dot(n.crown - 0.5)
-            - smoothstep(12.0, 7.0, road_d);
+            - smoothstep(9.0, 6.5, road_d);
         if density > 0.555 {
             c *= 1.0 - 0.3 * smoothstep(0.555, 0.58, density);
             let tree = smoothstep(0.58, 0.6, density);
