@@ -344,7 +344,9 @@ fn build_pack_command_writes_a_loadable_pack() {
     )
     .unwrap();
     let args = satmap_sim::cli::build_pack::Args {
-        route: route_path,
+        route: Some(route_path),
+        synthetic_km: None,
+        seed: 1,
         tiles: Some(dir.clone()),
         zoom: None,
         image: None,

@@ -8,7 +8,7 @@ use satmap_runtime::geo::Geodetic;
 
 use crate::route_pack_builder::{
     BuildOptions, DEFAULT_JPEG_QUALITY, Imagery, PAPER_CROP, SlippyTiles, TileCompression,
-    WorldCrs, WorldFileImage, build_pack, read_route_geojson,
+    SyntheticRoute, WorldCrs, WorldFileImage, build_pack, read_route_geojson,
 };
 use satmap_runtime::satellite::CropSpec;
 
@@ -16,11 +16,23 @@ use satmap_runtime::satellite::CropSpec;
 #[derive(clap::Args, Clone, Debug)]
 pub struct Args {
     /// Route: GeoJSON LineString in WGS84 (bare geometry, Feature or FeatureCollection).
-    #[arg(long)]
-    pub route: PathBuf,
+    #[arg(long, required_unless_present = "synthetic_km")]
+    pub route: Option<PathBuf>,
     /// Folder of slippy-map tiles `z/x/y.png|jpg` (Web Mercator).
-    #[arg(long, conflicts_with = "image", required_unless_present = "image")]
+    #[arg(
+        long,
+        conflicts_with = "image",
+        required_unless_present_any = ["image", "synthetic_km"]
+    )]
     pub tiles: Option<PathBuf>,
+    /// Instead of `--route` and imagery: a procedural winding road of this many kilometres
+    /// (up to 200) with satellite-like imagery around it, anchored at `--origin` (default
+    /// 48.137, 11.575), from `--seed`. How a 100 km route pack is made without map data.
+    #[arg(long, conflicts_with_all = ["route", "tiles", "image"])]
+    pub synthetic_km: Option<f64>,
+    /// Seed of `--synthetic-km`.
+    #[arg(long, default_value_t = 1, requires = "synthetic_km")]
+    pub seed: u64,
     /// Zoom level to read from `--tiles` (default: the highest present).
     #[arg(long, requires = "tiles")]
     pub zoom: Option<u8>,
@@ -138,18 +150,33 @@ pub fn run(args: &Args) -> Result<()> {
         compression: args.codec.compression(args.jpeg_quality),
     };
     opts.validate()?;
-    let route = read_route_geojson(&args.route)?;
-    let mut imagery: Box<dyn Imagery> = match (&args.tiles, &args.image) {
-        (Some(dir), _) => Box::new(SlippyTiles::open(dir, args.zoom)?),
-        (None, Some(image)) => Box::new(WorldFileImage::open(
-            image,
-            args.world_file.as_deref(),
-            args.world_crs,
-        )?),
-        (None, None) => anyhow::bail!("give --tiles DIR or --image FILE"),
-    };
     let started = std::time::Instant::now();
-    let built = build_pack(imagery.as_mut(), &route, &opts)?;
+    let built = if let Some(km) = args.synthetic_km {
+        let anchor = args
+            .origin
+            .unwrap_or(Geodetic::new(48.137, 11.575, 0.0));
+        let road = SyntheticRoute::new(args.seed, km, anchor)?;
+        let opts = BuildOptions {
+            origin: Some(road.anchor()),
+            ..opts
+        };
+        build_pack(&mut road.imagery_at(opts.gsd_m), &road.route_wgs84(), &opts)?
+    } else {
+        let Some(route_path) = &args.route else {
+            anyhow::bail!("give --route FILE or --synthetic-km KM");
+        };
+        let route = read_route_geojson(route_path)?;
+        let mut imagery: Box<dyn Imagery> = match (&args.tiles, &args.image) {
+            (Some(dir), _) => Box::new(SlippyTiles::open(dir, args.zoom)?),
+            (None, Some(image)) => Box::new(WorldFileImage::open(
+                image,
+                args.world_file.as_deref(),
+                args.world_crs,
+            )?),
+            (None, None) => anyhow::bail!("give --tiles DIR or --image FILE"),
+        };
+        build_pack(imagery.as_mut(), &route, &opts)?
+    };
     std::fs::write(&args.out, &built.bytes)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     let km = built.route_length_m / 1000.0;
