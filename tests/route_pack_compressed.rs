@@ -39,8 +39,7 @@ struct Packs {
 fn packs() -> &'static Packs {
     static PACKS: OnceLock<Packs> = OnceLock::new();
     PACKS.get_or_init(|| {
-        let route =
-            SyntheticRoute::new(7, ROUTE_KM, Geodetic::new(48.137, 11.575, 0.0)).unwrap();
+        let route = SyntheticRoute::new(7, ROUTE_KM, Geodetic::new(48.137, 11.575, 0.0)).unwrap();
         let build = |compression| {
             let opts = BuildOptions {
                 origin: Some(route.anchor()),
@@ -102,7 +101,12 @@ fn version_2_is_written_for_compressed_tiles_and_version_1_for_raw() {
     let tiles = RoutePack::parse(&p.raw).unwrap().tile_count();
     assert_eq!(RoutePack::parse(&p.jpeg).unwrap().tile_count(), tiles);
     // The procedural imagery is textured like aerial imagery: JPEG wins several times over.
-    assert!(p.jpeg.len() * 4 < p.raw.len(), "{} vs {}", p.jpeg.len(), p.raw.len());
+    assert!(
+        p.jpeg.len() * 4 < p.raw.len(),
+        "{} vs {}",
+        p.jpeg.len(),
+        p.raw.len()
+    );
     assert!(p.deflate.len() < p.raw.len());
 }
 
@@ -111,8 +115,7 @@ fn jpeg_crops_match_raw_within_the_stated_psnr_and_zlib_crops_are_identical() {
     let p = packs();
     let (mut raw_buf, mut jpeg_buf, mut zlib_buf) = (tile_buffer(), tile_buffer(), tile_buffer());
     let mut raw = PackSource::with_tile_buffer(RoutePack::parse(&p.raw).unwrap(), &mut raw_buf);
-    let mut jpeg =
-        PackSource::with_tile_buffer(RoutePack::parse(&p.jpeg).unwrap(), &mut jpeg_buf);
+    let mut jpeg = PackSource::with_tile_buffer(RoutePack::parse(&p.jpeg).unwrap(), &mut jpeg_buf);
     let mut zlib =
         PackSource::with_tile_buffer(RoutePack::parse(&p.deflate).unwrap(), &mut zlib_buf);
     for source in [&raw, &jpeg, &zlib] {
@@ -171,7 +174,10 @@ fn every_single_bit_flip_of_a_compressed_tile_is_caught_before_decoding() {
         // Payloads are outside the load-time checksums: the pack still loads, and the tile's
         // own checksum refuses it.
         let flipped = RoutePack::parse(&bytes).unwrap();
-        assert!(flipped.verified_tile(tile).is_none(), "bit {bit} undetected");
+        assert!(
+            flipped.verified_tile(tile).is_none(),
+            "bit {bit} undetected"
+        );
         if bit % 509 == 0 {
             // Through the crop: the tile is corrupt, never handed to the decoder.
             let mut buf = tile_buffer();
@@ -233,11 +239,19 @@ fn payloads_that_pass_the_checksum_but_are_not_the_tile_are_undecodable_not_a_pa
     let cases: Vec<(&str, TileCodec, Vec<u8>)> = vec![
         ("noise as JPEG", TileCodec::Jpeg, noise.clone()),
         ("noise as zlib", TileCodec::Deflate, noise),
-        ("truncated JPEG", TileCodec::Jpeg, jpeg[..jpeg.len() / 2].to_vec()),
+        (
+            "truncated JPEG",
+            TileCodec::Jpeg,
+            jpeg[..jpeg.len() / 2].to_vec(),
+        ),
         ("JPEG header only", TileCodec::Jpeg, jpeg[..200].to_vec()),
         ("JPEG of 32 px in a 64 px pack", TileCodec::Jpeg, jpeg_32),
         ("zlib of 32 px in a 64 px pack", TileCodec::Deflate, zlib_32),
-        ("truncated zlib", TileCodec::Deflate, zlib[..zlib.len() - 9].to_vec()),
+        (
+            "truncated zlib",
+            TileCodec::Deflate,
+            zlib[..zlib.len() - 9].to_vec(),
+        ),
         ("zlib labelled JPEG", TileCodec::Jpeg, zlib.clone()),
         ("JPEG labelled zlib", TileCodec::Deflate, jpeg.clone()),
         ("one byte", TileCodec::Jpeg, vec![0xFF]),
@@ -257,7 +271,11 @@ fn payloads_that_pass_the_checksum_but_are_not_the_tile_are_undecodable_not_a_pa
         assert!(source.pack().verified_tile(0).is_some(), "{name}");
         let (out, coverage) = crop(&mut source, &centre, &spec);
         assert_eq!(coverage, Coverage::Corrupt, "{name}");
-        assert_eq!(source.cache().peek(0), Some(TileState::Undecodable), "{name}");
+        assert_eq!(
+            source.cache().peek(0),
+            Some(TileState::Undecodable),
+            "{name}"
+        );
         assert!(out.iter().all(|&v| v == 0), "{name}: only fill is written");
         // Still usable: the next crop reports the same, without decoding again.
         let (_, again) = crop(&mut source, &centre, &spec);
@@ -311,9 +329,24 @@ fn route_replay_over_a_compressed_pack_decodes_within_its_bound_and_covers_every
     }
     assert!(jpeg.decoded_tiles > 0);
     assert_eq!(raw.decoded_tiles, 0);
+    // The tile buffer holds a crop's tiles and the ones ahead: along a route each tile is
+    // decoded once (a cache too small for that decodes the same tiles again every few steps).
+    let tiles = RoutePack::parse(&p.jpeg).unwrap().tile_count() as u64;
+    println!(
+        "route replay: {} steps, {} tiles decoded of {tiles} in the pack, at most {} a step",
+        jpeg.steps, jpeg.decoded_tiles, jpeg.max_decoded_per_step
+    );
+    assert!(
+        jpeg.decoded_tiles <= tiles,
+        "{} decodes",
+        jpeg.decoded_tiles
+    );
     assert!(usize::from(jpeg.max_decoded_per_step) <= MAX_CROP_TILES + PREFETCH_TILES_PER_STEP);
     // Lossless crops equal raw ones over the whole route; the lossy ones differ, and repeat.
     assert_eq!(zlib.crop_digest, raw.crop_digest);
     assert_ne!(jpeg.crop_digest, raw.crop_digest);
-    assert_eq!(replay_route(&p.jpeg, &cfg).unwrap().crop_digest, jpeg.crop_digest);
+    assert_eq!(
+        replay_route(&p.jpeg, &cfg).unwrap().crop_digest,
+        jpeg.crop_digest
+    );
 }

@@ -28,7 +28,10 @@ fn pack(gsd_m: f64) -> Vec<u8> {
         .collect();
     let tiles: Vec<PackTile<'_>> = payloads
         .iter()
-        .map(|(key, rgb)| PackTile { key: *key, payload: rgb })
+        .map(|(key, rgb)| PackTile {
+            key: *key,
+            payload: rgb,
+        })
         .collect();
     let header = PackHeader {
         tile_size_px: TILE_PX,

@@ -82,10 +82,13 @@ fn tile_decode_never_panics() {
     let rgb: Vec<u8> = (0..usize::from(SIDE_PX).pow(2) * 3)
         .map(|i| ((i * 37) % 251) as u8)
         .collect();
-    let seeds: Vec<Vec<u8>> = [TileCompression::Jpeg { quality: 75 }, TileCompression::Deflate]
-        .into_iter()
-        .map(|c| compress_tile(c, &rgb, SIDE_PX).unwrap().payload)
-        .collect();
+    let seeds: Vec<Vec<u8>> = [
+        TileCompression::Jpeg { quality: 75 },
+        TileCompression::Deflate,
+    ]
+    .into_iter()
+    .map(|c| compress_tile(c, &rgb, SIDE_PX).unwrap().payload)
+    .collect();
     assert_seeds_accepted(&seeds, tile_decode_case);
     fuzz("tile_decode", inputs(seeds, false), tile_decode_case);
 }

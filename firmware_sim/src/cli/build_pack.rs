@@ -7,8 +7,8 @@ use anyhow::{Context, Result};
 use satmap_runtime::geo::Geodetic;
 
 use crate::route_pack_builder::{
-    BuildOptions, DEFAULT_JPEG_QUALITY, Imagery, PAPER_CROP, SlippyTiles, TileCompression,
-    SyntheticRoute, WorldCrs, WorldFileImage, build_pack, read_route_geojson,
+    BuildOptions, DEFAULT_JPEG_QUALITY, Imagery, PAPER_CROP, SlippyTiles, SyntheticRoute,
+    TileCompression, WorldCrs, WorldFileImage, build_pack, read_route_geojson,
 };
 use satmap_runtime::satellite::CropSpec;
 
@@ -152,9 +152,7 @@ pub fn run(args: &Args) -> Result<()> {
     opts.validate()?;
     let started = std::time::Instant::now();
     let built = if let Some(km) = args.synthetic_km {
-        let anchor = args
-            .origin
-            .unwrap_or(Geodetic::new(48.137, 11.575, 0.0));
+        let anchor = args.origin.unwrap_or(Geodetic::new(48.137, 11.575, 0.0));
         let road = SyntheticRoute::new(args.seed, km, anchor)?;
         let opts = BuildOptions {
             origin: Some(road.anchor()),

@@ -18,13 +18,14 @@ use satmap_runtime::capacity::layout;
 
 use crate::arena::ArenaAllocator;
 use crate::cli::build_pack::CodecArg;
-use crate::route_pack_builder::DEFAULT_JPEG_QUALITY;
 use crate::harness::{
     DEFAULT_MAX_DEGRADED_SHARE, EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError,
     MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, ReplayConfig, RouteReplayConfig, ScenarioInput, replay,
     replay_route,
 };
 use crate::render::{camera_sheet, render_frame, route_frame_geojson};
+use crate::route_pack_builder::DEFAULT_JPEG_QUALITY;
+use satmap_runtime::satellite::CropSpec;
 
 /// Arguments of `drive`.
 #[derive(clap::Args, Debug)]
@@ -79,6 +80,37 @@ pub struct Args {
     /// replayed in minutes. The crop is the bundle's.
     #[arg(long, value_name = "PACK")]
     pub satellite_only: Option<PathBuf>,
+    /// With `--satellite-only`: the crop as `ROWSxCOLS@GSD_M` (e.g. `400x200@0.15`, the paper's)
+    /// instead of the bundle's, centred like the models' (15 m either side, 30 m behind and
+    /// ahead at the paper's size).
+    #[arg(long, value_parser = parse_crop, requires = "satellite_only")]
+    pub crop: Option<CropSpec>,
+}
+
+fn parse_crop(text: &str) -> Result<CropSpec, String> {
+    let bad = || format!("{text}: expected ROWSxCOLS@GSD_M, e.g. 400x200@0.15");
+    let (size, gsd) = text.split_once('@').ok_or_else(bad)?;
+    let (rows, cols) = size.split_once('x').ok_or_else(bad)?;
+    let (rows, cols): (usize, usize) = (
+        rows.parse().map_err(|_| bad())?,
+        cols.parse().map_err(|_| bad())?,
+    );
+    let gsd_m: f64 = gsd.parse().map_err(|_| bad())?;
+    if !(1..=4096).contains(&rows)
+        || !(1..=4096).contains(&cols)
+        || !(gsd_m > 0.001 && gsd_m <= 100.0)
+    {
+        return Err(format!(
+            "{text}: sides 1..=4096 px, GSD in (0.001, 100] m/px"
+        ));
+    }
+    Ok(CropSpec {
+        height_px: rows,
+        width_px: cols,
+        gsd_m,
+        x_min_m: -0.5 * cols as f64 * gsd_m,
+        y_min_m: -0.5 * rows as f64 * gsd_m,
+    })
 }
 
 /// The replay ran and a budget was exceeded (the report says which).
@@ -194,7 +226,7 @@ fn run_satellite_only(args: &Args, pack_path: &Path, rate_hz: f64) -> Result<()>
     let pack = std::fs::read(pack_path)
         .map_err(|e| BadArgument(format!("{}: {e}", pack_path.display())))?;
     let cfg = RouteReplayConfig {
-        crop: bundle.dims().crop_spec(),
+        crop: args.crop.unwrap_or_else(|| bundle.dims().crop_spec()),
         speed_mps: args.speed_mps,
         rate_hz,
         max_steps: 10_000_000,

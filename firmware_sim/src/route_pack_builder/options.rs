@@ -1,8 +1,8 @@
 //! Options of a build and their up-front checks: every number finite and in range, and pack
 //! tiles large enough for the model's crop.
 
-use satmap_runtime::geo::Geodetic;
 use satmap_runtime::capacity::layout::TILE_PIXELS_BYTES;
+use satmap_runtime::geo::Geodetic;
 use satmap_runtime::route_pack::{
     MAX_CROP_TILES, PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES, crop_tile_bound,
 };

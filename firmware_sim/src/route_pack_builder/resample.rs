@@ -11,8 +11,8 @@
 
 use glam::DVec2;
 use indicatif::{ProgressBar, ProgressStyle};
-use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::capacity::layout::ROUTE_PACK_BYTES;
+use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::route_pack::{PackHeader, PackTile, TileKey, encode_pack};
 
 use super::compress::{TileCompression, compress_tile, psnr_db};
@@ -109,13 +109,14 @@ pub fn build_pack(
         match fill_tile(imagery, &frame, key, opts)? {
             Ok(rgb) if opts.compression == TileCompression::Raw => payloads.push((key, rgb)),
             Ok(rgb) => {
-                let tile = compress_tile(opts.compression, &rgb, opts.tile_size_px).map_err(
-                    |detail| BuildError::TileEncode {
-                        tile_x: key.tile_x,
-                        tile_y: key.tile_y,
-                        detail,
-                    },
-                )?;
+                let tile =
+                    compress_tile(opts.compression, &rgb, opts.tile_size_px).map_err(|detail| {
+                        BuildError::TileEncode {
+                            tile_x: key.tile_x,
+                            tile_y: key.tile_y,
+                            detail,
+                        }
+                    })?;
                 squared_error += tile.squared_error;
                 worst_tile_psnr_db =
                     worst_tile_psnr_db.min(psnr_db(tile.squared_error, tile_samples));
@@ -135,7 +136,10 @@ pub fn build_pack(
     }
     let tiles: Vec<PackTile<'_>> = payloads
         .iter()
-        .map(|(key, rgb)| PackTile { key: *key, payload: rgb })
+        .map(|(key, rgb)| PackTile {
+            key: *key,
+            payload: rgb,
+        })
         .collect();
     let header = PackHeader {
         tile_size_px: opts.tile_size_px,

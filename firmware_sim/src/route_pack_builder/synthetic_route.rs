@@ -6,15 +6,21 @@
 //! Route: a heading that follows straights and circular arcs (radius 150..1500 m) joined by
 //! linear curvature ramps (clothoid-like, 40..100 m), integrated at one vertex every ~10 m.
 //! Once the road is farther than [`HOME_FRACTION`] of its length from its start, arcs turn
-//! back towards the start, so the road winds instead of running away.
+//! back towards the start, so the road winds instead of running away (100 km routes of seeds
+//! 1..3 stay within 21 km of their start, well inside the builder's
+//! [`MAX_ROUTE_RADIUS_M`](super::MAX_ROUTE_RADIUS_M)).
 //!
 //! Imagery: source coordinates are the route frame's metres (ENU at the anchor, as
 //! [`RasterImagery`](crate::harness::world_imagery::RasterImagery)). A 7 m asphalt band along
-//! the route with solid edge lines and a dashed centre line, gravel shoulders and grass
-//! verges, over farmland: domain-warped Voronoi fields (~50..200 m) with their own base colour,
-//! row stripes and texture (value noise, 0.8..40 m), field-edge tracks, and blobs of trees.
+//! the route with solid edge lines and a dashed centre line (3 m dashes every 12 m), gravel
+//! shoulders and grass verges, over farmland: domain-warped Voronoi fields (~50..200 m) of
+//! eight kinds (crops, soil, pasture, meadow, woodland) with their own base colour, row
+//! stripes and texture, field-edge tracks, and blobs of trees. Texture is value noise of four
+//! octaves (90, 7, 2.5 and 0.9 m, four channels each, read from one 256 x 256 lattice table at
+//! a different rotation and offset per octave) plus a 0.25 m grain hash. Markings and the
+//! asphalt's edge are box-filtered over one pack pixel ([`SyntheticRoute::imagery_at`]).
 //! Distance to the road uses a hash grid of the route's segments ([`CELL_M`] cells) built
-//! once; a sample does no allocation and never returns a gap.
+//! once; a sample (about 90 ns) does no allocation and never returns a gap.
 
 use std::f64::consts::{PI, TAU};
 
@@ -24,6 +30,7 @@ use rand_pcg::Pcg64;
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 
 use super::error::BuildError;
+use super::frame::ground_point;
 use super::imagery::{Gap, Imagery};
 
 /// Longest route, kilometres.
@@ -46,8 +53,6 @@ pub const CELL_M: f64 = 16.0;
 const ROAD_REACH_M: f64 = 9.0;
 /// Share of pieces that are straights (while not homing).
 const STRAIGHT_SHARE: f64 = 0.35;
-/// Mean Earth radius of the builder's tangent-plane drop, metres (`resample.rs`).
-const EARTH_RADIUS_M: f64 = 6_371_000.0;
 /// Side of a cell of the field Voronoi grid, metres (one field per cell on average).
 const FIELD_CELL_M: f64 = 110.0;
 
@@ -95,21 +100,14 @@ impl SyntheticRoute {
     }
 
     /// The route in WGS84 (ellipsoid height 0), one point per vertex of [`Self::route_m`]:
-    /// the builder maps them back onto [`Self::route_m`] to well under a millimetre when
-    /// given [`Self::anchor`] as its origin.
+    /// the point on the ellipsoid straight below (along the frame's up) the plane point, so
+    /// that WGS84 -> ENU at [`Self::anchor`] (the builder with this origin, the vehicle, and
+    /// [`Imagery::project`] here) gives back [`Self::route_m`] to well under a millimetre.
     #[must_use]
     pub fn route_wgs84(&self) -> Vec<Geodetic> {
-        let drop_m = self.anchor.height_m;
         self.route_m
             .iter()
-            .map(|p| {
-                // The tangent-plane point dropped back to the ellipsoid, as the builder does
-                // for pack pixels: forcing height 0 on the plane point itself would shift it
-                // sideways by d^3 / 2R^2 (1.5 m at 50 km).
-                let z_m = -drop_m - p.length_squared() / (2.0 * EARTH_RADIUS_M);
-                let g = self.frame.enu_to_geodetic(DVec3::new(p.x, p.y, z_m));
-                Geodetic::new(g.lat_deg, g.lon_deg, 0.0)
-            })
+            .map(|p| on_ellipsoid(&self.frame, *p))
             .collect()
     }
 
@@ -152,6 +150,19 @@ impl SyntheticRoute {
     pub fn imagery_at(&self, gsd_m: f64) -> SyntheticRouteImagery<'_> {
         SyntheticRouteImagery::new(self, gsd_m)
     }
+}
+
+/// The point at ellipsoid height 0 whose ENU x, y in `frame` are `p` (height set to exactly 0).
+///
+/// Forcing height 0 on the plane point itself would shift it sideways by about
+/// `d^3 / 2R^2` (1.5 m at 50 km); the builder's [`ground_point`] (the plane point dropped onto
+/// a sphere) is within metres of the ellipsoid, and one step along the frame's up by its height
+/// lands on the ellipsoid to within micrometres without moving the point in x, y.
+fn on_ellipsoid(frame: &EnuFrame, p: DVec2) -> Geodetic {
+    let g = ground_point(frame, p);
+    let z_m = frame.geodetic_to_enu(&g).z - g.height_m;
+    let g = frame.enu_to_geodetic(DVec3::new(p.x, p.y, z_m));
+    Geodetic::new(g.lat_deg, g.lon_deg, 0.0)
 }
 
 /// One piece of the road: the curvature ramps linearly from `k_from` to `k_to` over
@@ -270,15 +281,14 @@ struct SegmentGrid {
     mask: usize,
 }
 
-/// Floor of `v` as an `i32` (saturating), without a libm call.
+/// Floor of `v` as an `i32`, for |v| < 2^31 (beyond, or for NaN, some `i32`), without a libm
+/// call or the saturation checks of `as`: adding 1.5 * 2^52 rounds to an integer in the low
+/// mantissa bits (two's complement), then one compare turns the rounding into a floor.
 #[inline]
 fn floor_i32(v: f64) -> i32 {
-    let i = v as i32;
-    if f64::from(i) > v {
-        i.saturating_sub(1)
-    } else {
-        i
-    }
+    const MAGIC: f64 = 6_755_399_441_055_744.0;
+    let i = (v + MAGIC).to_bits() as u32 as i32;
+    i.wrapping_sub(i32::from(f64::from(i) > v))
 }
 
 #[inline]
@@ -388,18 +398,19 @@ fn unit(h: u32) -> f64 {
 
 #[inline]
 fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
-    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    // A product, not a quotient: with constant edges the reciprocal folds at compile time.
+    let t = ((x - e0) * (1.0 / (e1 - e0))).clamp(0.0, 1.0);
     t * t * (3.0 - 2.0 * t)
 }
 
-/// Share of a pixel of width `pixel_m` centred at `x` that the interval of width `width`
-/// centred at 0 covers (a box-filtered edge: markings thinner than a pixel keep their area
-/// instead of aliasing).
+/// Share of a pixel of width `pixel_m` (`inv_pixel` its inverse) centred at `x` that the
+/// interval of width `width` centred at 0 covers (a box-filtered edge: markings thinner than
+/// a pixel keep their area instead of aliasing).
 #[inline]
-fn box_cover(x: f32, width: f32, pixel_m: f32) -> f32 {
+fn box_cover(x: f32, width: f32, pixel_m: f32, inv_pixel: f32) -> f32 {
     let lo = (x - 0.5 * pixel_m).max(-0.5 * width);
     let hi = (x + 0.5 * pixel_m).min(0.5 * width);
-    ((hi - lo) / pixel_m).clamp(0.0, 1.0)
+    ((hi - lo) * inv_pixel).clamp(0.0, 1.0)
 }
 
 /// Side of the value-noise lattice table, lattice points (a power of two; every octave tiles
@@ -416,9 +427,21 @@ struct Octave {
     offset: DVec2,
 }
 
+/// The four octaves' maps side by side (lane k: octave k), for lattice coordinates relative
+/// to a road-grid cell's corner: `x = base_x + xx * dx + xy * dy` with `(dx, dy)` the point
+/// minus the corner (under 16 m, so f32 keeps it exact enough anywhere on a 200 km route).
+#[derive(Clone, Copy, Debug)]
+struct OctaveLanes {
+    xx: Vec4,
+    xy: Vec4,
+    yx: Vec4,
+    yy: Vec4,
+}
+
 /// The octaves, periods in metres: 0 (90 m) warp x, warp y, moisture, large tree density;
-/// 1 (11 m) small tree density, bare-soil patches; 2..4 (4, 1.7, 0.7 m) texture and canopy.
-const OCTAVE_PERIODS_M: [f64; 5] = [90.0, 11.0, 4.0, 1.7, 0.7];
+/// 1 (7 m) small tree density, bare-soil patches, texture, canopy; 2 and 3 (2.5, 0.9 m)
+/// texture, canopy.
+const OCTAVE_PERIODS_M: [f64; 4] = [90.0, 7.0, 2.5, 0.9];
 
 /// A kind of field: base colour, row-stripe contrast, texture contrast, bare-soil patchiness,
 /// extra tree density.
@@ -487,6 +510,10 @@ struct FieldSites {
     sites: [Vec2; 9],
     hashes: [u32; 9],
     rows: [DVec2; 9],
+    /// The last nearest and second-nearest sites, and the bisector distance per unit of
+    /// their squared-distance difference, metres.
+    pair: (usize, usize),
+    edge_scale: f32,
 }
 
 /// What [`SyntheticRouteImagery::field`] finds at a point.
@@ -502,9 +529,11 @@ struct FieldAt {
 struct Noise {
     /// Octave 0: warp x, warp y, moisture, large tree density.
     coarse: Vec4,
-    /// Octaves 2..4, channel x: fine texture.
+    /// Octave 1: small tree density, bare-soil patches.
+    mid: Vec4,
+    /// Octaves 1..3 (z, x, x): texture, coarse to fine.
     tex: Vec3A,
-    /// Octaves 2..4, channel y: canopy texture.
+    /// Octaves 1..3 (w, y, y): canopy texture, coarse to fine.
     crown: Vec3A,
     /// Per-0.25 m grain in [-0.5, 0.5).
     grain: f32,
@@ -517,9 +546,16 @@ pub struct SyntheticRouteImagery<'a> {
     frame: EnuFrame,
     seed: u32,
     lattice: Box<Lattice>,
-    octaves: [Octave; 5],
+    octaves: [Octave; 4],
+    lanes: OctaveLanes,
+    /// The current road cell's corner, metres, and the octaves' lattice coordinates there
+    /// (modulo the lattice side).
+    corner: DVec2,
+    base_x: Vec4,
+    base_y: Vec4,
     /// Pixel footprint the paint and the asphalt's edges are box-filtered over, metres.
     pixel_m: f32,
+    inv_pixel: f32,
     road_cell: (i32, i32),
     road_range: (u32, u32),
     fields: FieldSites,
@@ -530,7 +566,7 @@ impl<'a> SyntheticRouteImagery<'a> {
     /// markings are box-filtered over one pixel; clamped to 0.01..=10 m).
     #[must_use]
     pub fn new(route: &'a SyntheticRoute, pixel_m: f64) -> Self {
-        let mut z = route.seed ^ 0x1a6e_5eed_f1e1_d5u64;
+        let mut z = route.seed ^ 0x001a_6e5e_edf1_e1d5_u64;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
         let seed = (z ^ (z >> 31)) as u32;
@@ -547,7 +583,7 @@ impl<'a> SyntheticRouteImagery<'a> {
             .unwrap_or_else(|_| unreachable!("the lattice has LATTICE_SIDE^2 points"));
         let side = LATTICE_SIDE as f64;
         let octaves = std::array::from_fn(|k| {
-            let h = hash2(seed ^ 0x0c7a_7e5, k as i32, 0);
+            let h = hash2(seed ^ 0x00c7_a7e5, k as i32, 0);
             // Rotations spread over the half turn, so no two octaves share a lattice axis.
             let r =
                 DVec2::from_angle(PI * (k as f64 * 0.382 + 0.1 * unit(h))) / OCTAVE_PERIODS_M[k];
@@ -557,19 +593,35 @@ impl<'a> SyntheticRouteImagery<'a> {
                 offset: DVec2::new(unit(remix(h)), unit(remix(remix(h)))) * side,
             }
         });
-        // A cell beyond any route (i32::MIN) is empty, so the stale range is right for it.
+        let lane = |f: fn(&Octave) -> f64| {
+            Vec4::from_array(std::array::from_fn(|k| f(&octaves[k]) as f32))
+        };
+        let lanes = OctaveLanes {
+            xx: lane(|o| o.row_x.x),
+            xy: lane(|o| o.row_x.y),
+            yx: lane(|o| o.row_y.x),
+            yy: lane(|o| o.row_y.y),
+        };
+        // A cell beyond any route (i32::MIN) is empty, so the stale range is right for it;
+        // the lattice base is set with the first sample's cell.
         let road_cell = (i32::MIN, i32::MIN);
+        let pixel_m = if pixel_m.is_finite() {
+            pixel_m.clamp(0.01, 10.0) as f32
+        } else {
+            DEFAULT_PIXEL_M as f32
+        };
         Self {
             route,
             frame: route.frame,
             seed,
             lattice,
             octaves,
-            pixel_m: if pixel_m.is_finite() {
-                pixel_m.clamp(0.01, 10.0) as f32
-            } else {
-                DEFAULT_PIXEL_M as f32
-            },
+            lanes,
+            corner: DVec2::NAN,
+            base_x: Vec4::ZERO,
+            base_y: Vec4::ZERO,
+            pixel_m,
+            inv_pixel: 1.0 / pixel_m,
             road_cell,
             road_range: route.grid.cell(road_cell.0, road_cell.1),
             fields: FieldSites {
@@ -577,6 +629,8 @@ impl<'a> SyntheticRouteImagery<'a> {
                 sites: [Vec2::ZERO; 9],
                 hashes: [0; 9],
                 rows: [DVec2::ZERO; 9],
+                pair: (usize::MAX, usize::MAX),
+                edge_scale: 0.0,
             },
         }
     }
@@ -589,6 +643,17 @@ impl<'a> SyntheticRouteImagery<'a> {
         if cell != self.road_cell {
             self.road_cell = cell;
             self.road_range = self.route.grid.cell(cell.0, cell.1);
+            self.corner = DVec2::new(f64::from(cell.0), f64::from(cell.1)) * CELL_M;
+            let side = LATTICE_SIDE as f64;
+            let wrap = |v: f64| (v - side * f64::from(floor_i32(v * (1.0 / side)))) as f32;
+            let base = |k: usize| {
+                let o = &self.octaves[k];
+                let q = DVec2::new(o.row_x.dot(self.corner), o.row_y.dot(self.corner)) + o.offset;
+                (wrap(q.x), wrap(q.y))
+            };
+            let b: [(f32, f32); 4] = std::array::from_fn(base);
+            self.base_x = Vec4::new(b[0].0, b[1].0, b[2].0, b[3].0);
+            self.base_y = Vec4::new(b[0].1, b[1].1, b[2].1, b[3].1);
         }
         let (start, end) = self.road_range;
         let mut best = ROAD_REACH_M * ROAD_REACH_M;
@@ -608,7 +673,7 @@ impl<'a> SyntheticRouteImagery<'a> {
     /// The field containing `q` (warped metres).
     #[inline]
     fn field(&mut self, q: DVec2) -> FieldAt {
-        let g = q / FIELD_CELL_M;
+        let g = q * (1.0 / FIELD_CELL_M);
         let cell = (floor_i32(g.x), floor_i32(g.y));
         if self.fields.cell != Some(cell) {
             let salt = self.seed ^ 0x00f1_e1d5;
@@ -630,6 +695,7 @@ impl<'a> SyntheticRouteImagery<'a> {
                 self.fields.hashes[k] = hash;
             }
             self.fields.cell = Some(cell);
+            self.fields.pair = (usize::MAX, usize::MAX);
         }
         // In f32 about the cell's corner (sites within 2 cells of it).
         let base = DVec2::new(f64::from(cell.0), f64::from(cell.1));
@@ -645,26 +711,52 @@ impl<'a> SyntheticRouteImagery<'a> {
                 (d2, i2) = (d, k);
             }
         }
-        // Distance to the bisector of the two nearest sites.
-        let gap = (self.fields.sites[i2] - self.fields.sites[i1]).length();
+        // Distance to the bisector of the two nearest sites (the pair rarely changes from one
+        // sample to the next: its scale is kept).
+        if self.fields.pair != (i1, i2) {
+            let gap = (self.fields.sites[i2] - self.fields.sites[i1]).length();
+            self.fields.pair = (i1, i2);
+            self.fields.edge_scale = FIELD_CELL_M as f32 / (2.0 * gap.max(1e-6));
+        }
         FieldAt {
             hash: self.fields.hashes[i1],
-            edge_m: (d2 - d1) / (2.0 * gap.max(1e-6)) * FIELD_CELL_M as f32,
+            edge_m: (d2 - d1) * self.fields.edge_scale,
             rows: self.fields.rows[i1],
         }
     }
 
-    /// Value noise of octave `k` at `p`: four channels in [0, 1].
+    /// Value noise of the four octaves at `p` (in the road cell of the last [`Self::road`]
+    /// call): four channels each, in [0, 1].
     #[inline]
-    fn octave(&self, k: usize, p: DVec2) -> Vec4 {
-        let o = &self.octaves[k];
-        let (x, y) = (o.row_x.dot(p) + o.offset.x, o.row_y.dot(p) + o.offset.y);
-        let (xi, yi) = (floor_i32(x), floor_i32(y));
-        let (fx, fy) = ((x - f64::from(xi)) as f32, (y - f64::from(yi)) as f32);
-        let (u, v) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
-        // Two's complement masking is the lattice's wrap-around (rem_euclid).
+    fn octaves(&self, p: DVec2) -> [Vec4; 4] {
+        /// 1.5 * 2^23: adding it rounds an f32 to an integer held in the low mantissa bits.
+        const MAGIC: f32 = 12_582_912.0;
+        let l = (p - self.corner).as_vec2();
+        let o = &self.lanes;
+        let x = self.base_x + o.xx * l.x + o.xy * l.y;
+        let y = self.base_y + o.yx * l.x + o.yy * l.y;
+        // Floors by rounding x - 0.5 (a tie gives the cell below with a fraction of 1: the
+        // same value, as value noise is continuous).
+        let (rx, ry) = ((x - 0.5) + MAGIC, (y - 0.5) + MAGIC);
+        let (fx, fy) = (x - (rx - MAGIC), y - (ry - MAGIC));
+        let u = fx * fx * (3.0 - 2.0 * fx);
+        let v = fy * fy * (3.0 - 2.0 * fy);
+        let (rx, ry, u, v) = (rx.to_array(), ry.to_array(), u.to_array(), v.to_array());
+        [
+            self.lattice_at(rx[0], ry[0], u[0], v[0]),
+            self.lattice_at(rx[1], ry[1], u[1], v[1]),
+            self.lattice_at(rx[2], ry[2], u[2], v[2]),
+            self.lattice_at(rx[3], ry[3], u[3], v[3]),
+        ]
+    }
+
+    /// Bilinear blend of the lattice cell whose corner is held in the low bits of `rx`, `ry`
+    /// (see [`Self::octaves`]), at smoothed fractions `u`, `v`.
+    #[inline(always)]
+    fn lattice_at(&self, rx: f32, ry: f32, u: f32, v: f32) -> Vec4 {
+        // Two's complement masking is the lattice's wrap-around.
         let mask = LATTICE_SIDE as u32 - 1;
-        let (x0, y0) = (xi as u32 & mask, yi as u32 & mask);
+        let (x0, y0) = (rx.to_bits() & mask, ry.to_bits() & mask);
         let (x1, y1) = ((x0 + 1) & mask, (y0 + 1) & mask);
         let at = |x: u32, y: u32| self.lattice[(y * LATTICE_SIDE as u32 + x) as usize];
         let top = at(x0, y0).lerp(at(x1, y0), u);
@@ -675,17 +767,19 @@ impl<'a> SyntheticRouteImagery<'a> {
     /// Colour of the ground at route-frame point `p`, 0..255 per channel (unclamped).
     fn colour(&mut self, p: DVec2) -> Vec3A {
         let road = self.road(p);
-        let g = self.pixel_m;
-        let (n2, n3, n4) = (self.octave(2, p), self.octave(3, p), self.octave(4, p));
+        let (g, ig) = (self.pixel_m, self.inv_pixel);
+        let [coarse, mid, n2, n3] = self.octaves(p);
         let noise = Noise {
-            coarse: self.octave(0, p),
-            tex: Vec3A::new(n2.x, n3.x, n4.x),
-            crown: Vec3A::new(n2.y, n3.y, n4.y),
-            // Sensor-like grain: one hash on a 0.25 m lattice.
+            coarse,
+            mid,
+            tex: Vec3A::new(mid.z, n2.x, n3.x),
+            crown: Vec3A::new(mid.w, n2.y, n3.y),
+            // Sensor-like grain: one hash on a 0.25 m lattice (offset by half a cell from the
+            // road grid's corners).
             grain: unit(hash2(
                 self.seed ^ 0x6a1e,
-                floor_i32(p.x * 4.0),
-                floor_i32(p.y * 4.0),
+                floor_i32(p.x * 4.0 + 0.5),
+                floor_i32(p.y * 4.0 + 0.5),
             )) as f32
                 - 0.5,
         };
@@ -708,12 +802,13 @@ impl<'a> SyntheticRouteImagery<'a> {
             * (1.0 + 0.12 * (tex.z - 0.5) + 0.08 * (tex.x - 0.5) + 0.06 * (moist - 0.5)
                 - 0.05 * wheel
                 + 0.08 * noise.grain);
-        c = c.lerp(asphalt, box_cover(d32, ROAD_WIDTH_M as f32, g));
+        c = c.lerp(asphalt, box_cover(d32, ROAD_WIDTH_M as f32, g, ig));
         // Dash centres at 1.5 m of each 12 m period; `along` is wrapped to [-6, 6) m.
-        let u = (s - 0.5 * DASH_M) / DASH_PERIOD_M + 0.5;
+        let u = (s - 0.5 * DASH_M) * (1.0 / DASH_PERIOD_M) + 0.5;
         let along = ((u - f64::from(floor_i32(u)) - 0.5) * DASH_PERIOD_M) as f32;
-        let paint = box_cover(d32 - EDGE_LINE_M, EDGE_LINE_WIDTH_M, g)
-            .max(box_cover(d32, CENTRE_LINE_WIDTH_M, g) * box_cover(along, DASH_M as f32, g));
+        let paint = box_cover(d32 - EDGE_LINE_M, EDGE_LINE_WIDTH_M, g, ig).max(
+            box_cover(d32, CENTRE_LINE_WIDTH_M, g, ig) * box_cover(along, DASH_M as f32, g, ig),
+        );
         if paint > 0.0 {
             c = c.lerp(PAINT * (0.92 + 0.12 * tex.y), paint);
         }
@@ -724,8 +819,7 @@ impl<'a> SyntheticRouteImagery<'a> {
     #[inline]
     fn terrain(&mut self, p: DVec2, road_d: f32, n: &Noise) -> Vec3A {
         let [warp_x, warp_y, moist, trees_big] = n.coarse.to_array();
-        let mid = self.octave(1, p);
-        let (trees_small, patch) = (mid.x, mid.y);
+        let (trees_small, patch) = (n.mid.x, n.mid.y);
         let q = p + DVec2::new(f64::from(warp_x) - 0.5, f64::from(warp_y) - 0.5) * 60.0;
         let field = self.field(q);
         let kind = &FIELD_KINDS[usize::from(FIELD_DRAW[(field.hash >> 28) as usize])];
@@ -764,9 +858,9 @@ impl Imagery for SyntheticRouteImagery<'_> {
     }
 
     fn sample(&mut self, p: DVec2) -> Result<Result<[u8; 3], Gap>, BuildError> {
-        // Clamped first, so `+ 0.5` then truncation rounds (NaN becomes 0).
-        let c = self.colour(p).clamp(Vec3A::ZERO, Vec3A::splat(255.0)) + 0.5;
-        Ok(Ok([c.x as u8, c.y as u8, c.z as u8]))
+        // Clamped, then rounded by adding 2^23: the integer lands in the low mantissa bits.
+        let c = self.colour(p).clamp(Vec3A::ZERO, Vec3A::splat(255.0)) + 8_388_608.0;
+        Ok(Ok(c.to_array().map(|v| v.to_bits() as u8)))
     }
 
     fn gap_error(&self, _gap: &Gap, lat_deg: f64, lon_deg: f64) -> BuildError {
@@ -779,7 +873,7 @@ impl Imagery for SyntheticRouteImagery<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::route_pack_builder::{BuildOptions, build_pack};
+    use crate::route_pack_builder::{BuildOptions, MAX_ROUTE_RADIUS_M, build_pack};
     use satmap_runtime::satellite::CropSpec;
 
     const ANCHOR: Geodetic = Geodetic::new(48.137, 11.575, 0.0);
@@ -819,6 +913,34 @@ mod tests {
     fn is_road(c: [u8; 3]) -> bool {
         let (lo, hi) = (*c.iter().min().unwrap(), *c.iter().max().unwrap());
         hi - lo <= 12 && lo >= 45
+    }
+
+    #[test]
+    fn floor_without_libm() {
+        for v in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            0.999_999_9,
+            -0.999_999_9,
+            1e-12,
+            -1e-12,
+            2.5,
+            -2.5,
+            123_456.75,
+            -123_456.75,
+            2e9,
+            -2e9,
+        ] {
+            assert_eq!(floor_i32(v), v.floor() as i32, "{v}");
+        }
+        // Out of range or NaN: some value, no panic.
+        for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300] {
+            let _ = floor_i32(v);
+        }
     }
 
     #[test]
@@ -898,20 +1020,43 @@ mod tests {
     }
 
     #[test]
+    fn long_routes_stay_inside_the_builders_frame() {
+        for seed in 1..=3 {
+            let r = SyntheticRoute::new(seed, MAX_ROUTE_KM, ANCHOR).unwrap();
+            assert!(
+                r.max_distance_from_start_m() < 0.5 * MAX_ROUTE_RADIUS_M,
+                "{seed}: {}",
+                r.max_distance_from_start_m()
+            );
+        }
+    }
+
+    #[test]
     fn wgs84_round_trips_to_the_route_frame() {
         let r = SyntheticRoute::new(5, 20.0, ANCHOR).unwrap();
         let frame = EnuFrame::new(r.anchor());
         let wgs = r.route_wgs84();
         assert_eq!(wgs.len(), r.route_m().len());
+        let img = r.imagery();
         for (g, p) in wgs.iter().zip(r.route_m()) {
             assert_eq!(g.height_m, 0.0);
             let back = frame.geodetic_to_enu(g).truncate();
-            assert!(back.distance(*p) < 1e-3, "{back} vs {p}");
+            assert!(back.distance(*p) < 1e-4, "{back} vs {p}");
+            assert!(img.project(g.lat_deg, g.lon_deg).distance(*p) < 1e-4);
         }
-        let img = r.imagery();
-        let last = wgs[wgs.len() - 1];
-        let projected = img.project(last.lat_deg, last.lon_deg);
-        assert!(projected.distance(r.route_m()[wgs.len() - 1]) < 1e-3);
+        // Far out too (the builder allows 105 km), and off the equator and at it.
+        for anchor in [
+            ANCHOR,
+            Geodetic::new(0.0, 30.0, 120.0),
+            Geodetic::new(-60.0, -70.0, 0.0),
+        ] {
+            let frame = EnuFrame::new(anchor);
+            for p in [DVec2::new(100_000.0, 0.0), DVec2::new(-40_000.0, 90_000.0)] {
+                let g = on_ellipsoid(&frame, p);
+                let back = frame.geodetic_to_enu(&g).truncate();
+                assert!(back.distance(p) < 1e-4, "{anchor:?} {p}: {back}");
+            }
+        }
     }
 
     #[test]
@@ -960,6 +1105,24 @@ mod tests {
         // Dashes 3 m of every 12 m; edge lines solid (the polyline's corners aside).
         assert!((0.15..0.35).contains(&centre), "{centre}");
         assert!(edge > 0.9, "{edge}");
+    }
+
+    #[test]
+    fn continuous_across_grid_cells() {
+        let r = SyntheticRoute::new(4, 2.0, ANCHOR).unwrap();
+        let mut img = r.imagery();
+        // Either side of road-grid cell corners (where the noise's local frame changes): at
+        // most rounding apart.
+        for (cx, cy) in [(0, 0), (3, -2), (-7, 5), (40, 40), (-300, 120)] {
+            let corner = DVec2::new(f64::from(cx), f64::from(cy)) * CELL_M;
+            for d in [DVec2::X, DVec2::Y, DVec2::ONE] {
+                let (a, b) = (corner - d * 1e-7, corner + d * 1e-7);
+                let (ca, cb) = (rgb(&mut img, a), rgb(&mut img, b));
+                for k in 0..3 {
+                    assert!(ca[k].abs_diff(cb[k]) <= 1, "{corner} {d}: {ca:?} vs {cb:?}");
+                }
+            }
+        }
     }
 
     #[test]

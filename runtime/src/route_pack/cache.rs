@@ -24,6 +24,15 @@ pub const PREFETCH_TILES_PER_STEP: usize = 2;
 // step still needs and verify them twice.
 const _: () = assert!(TILE_CACHE_TILES >= MAX_CROP_TILES + PREFETCH_TILES_PER_STEP);
 
+/// Which entry a lookup may replace when the cache is full.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Evict {
+    /// The least recently used (a crop's own tiles).
+    LeastRecent,
+    /// The least recently used of those not used this step (prefetch).
+    OlderThanStep,
+}
+
 /// Outcome of verifying a tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TileState {
@@ -55,6 +64,8 @@ pub struct TileCache {
     verified_total: u64,
     decoded_this_step: usize,
     decoded_total: u64,
+    /// The clock when the step began: entries used after it are this step's.
+    step_clock: u64,
 }
 
 impl Default for TileCache {
@@ -74,6 +85,7 @@ impl TileCache {
             verified_total: 0,
             decoded_this_step: 0,
             decoded_total: 0,
+            step_clock: 0,
         }
     }
 
@@ -81,6 +93,21 @@ impl TileCache {
     pub fn begin_step(&mut self) {
         self.verified_this_step = 0;
         self.decoded_this_step = 0;
+        self.step_clock = self.clock;
+    }
+
+    /// Mark cached tile `tile` as used now (prefetch keeps the tiles ahead it already holds
+    /// from being evicted before the crop reaches them); its state, or `None` if not cached.
+    pub fn touch(&mut self, tile: usize) -> Option<TileState> {
+        self.clock += 1;
+        let clock = self.clock;
+        let e = self
+            .entries
+            .iter_mut()
+            .flatten()
+            .find(|e| e.tile as usize == tile)?;
+        e.last_used = clock;
+        Some(e.state)
     }
 
     /// Tiles decoded since [`Self::begin_step`] (compressed packs only).
@@ -138,23 +165,50 @@ impl TileCache {
         tile: usize,
         pixels: &mut [u8],
     ) -> Option<(TileState, usize)> {
+        self.lookup(pack, tile, pixels, Evict::LeastRecent)
+    }
+
+    /// Like [`Self::get_or_verify`], for a tile wanted ahead of need: it never evicts a tile
+    /// used since [`Self::begin_step`] (this step's crop and the tiles ahead already held), so
+    /// when those fill the cache prefetch stops (`None`) instead of evicting what it fetched a
+    /// moment ago and fetching it again every step.
+    pub fn prefetch(
+        &mut self,
+        pack: &RoutePack<'_>,
+        tile: usize,
+        pixels: &mut [u8],
+    ) -> Option<(TileState, usize)> {
+        self.lookup(pack, tile, pixels, Evict::OlderThanStep)
+    }
+
+    fn lookup(
+        &mut self,
+        pack: &RoutePack<'_>,
+        tile: usize,
+        pixels: &mut [u8],
+        evict: Evict,
+    ) -> Option<(TileState, usize)> {
         let capacity = Self::capacity(pack, pixels.len());
         let entries = self.entries.get_mut(..capacity)?;
         self.clock += 1;
         let clock = self.clock;
-        if let Some((k, e)) = entries
-            .iter_mut()
-            .enumerate()
-            .find_map(|(k, e)| e.as_mut().filter(|e| e.tile as usize == tile).map(|e| (k, e)))
-        {
+        if let Some((k, e)) = entries.iter_mut().enumerate().find_map(|(k, e)| {
+            e.as_mut()
+                .filter(|e| e.tile as usize == tile)
+                .map(|e| (k, e))
+        }) {
             e.last_used = clock;
             return Some((e.state, k));
         }
+        let step_clock = self.step_clock;
         let slot = match entries.iter().position(Option::is_none) {
             Some(free) => free,
             None => entries
                 .iter()
                 .enumerate()
+                .filter(|(_, e)| {
+                    evict == Evict::LeastRecent || e.is_some_and(|e| e.last_used <= step_clock)
+                })
                 .min_by_key(|(_, e)| e.map_or(0, |e| e.last_used))
                 .map(|(i, _)| i)?,
         };
@@ -169,9 +223,9 @@ impl TileCache {
                 self.decoded_total += 1;
                 let bytes = pack.header().tile_bytes();
                 let out = pixels.get_mut(slot * bytes..(slot + 1) * bytes);
-                match out.map(|out| {
-                    decode_tile(pack.codec(), payload, pack.header().tile_size_px, out)
-                }) {
+                match out
+                    .map(|out| decode_tile(pack.codec(), payload, pack.header().tile_size_px, out))
+                {
                     Some(Ok(())) => TileState::Verified,
                     _ => TileState::Undecodable,
                 }

@@ -32,7 +32,7 @@ pub const FILL_RGB: [u8; 3] = [0, 0, 0];
 /// smaller tiles or larger crops.
 pub const MAX_CROP_TILES: usize = 36;
 /// Most points sampled ahead along the route per step when choosing tiles to prefetch.
-const MAX_PREFETCH_SAMPLES: usize = 16;
+const MAX_PREFETCH_SAMPLES: usize = 4;
 
 /// Why a crop could not be attempted (the output is all fill and coverage is `None`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -419,16 +419,24 @@ impl<'a> PackSource<'a> {
                 needed: tiles,
             });
         }
-        // Resolve (verify, decode) first, then borrow the decoded slots for sampling.
-        let mut resolved = [Resolved::Missing; MAX_CROP_TILES];
-        for (k, slot) in resolved.iter_mut().take(tiles).enumerate() {
+        // The window's tiles, found once.
+        let mut found: [Option<(TileKey, usize)>; MAX_CROP_TILES] = [None; MAX_CROP_TILES];
+        for (k, f) in found.iter_mut().take(tiles).enumerate() {
             let (col, row) = (k as i64 % cols, k as i64 / cols);
-            let (Ok(tx), Ok(ty)) = (i32::try_from(tile_x0 + col), i32::try_from(tile_y0 + row))
-            else {
-                continue;
-            };
-            let key = TileKey::new(tx, ty);
-            let Some(i) = self.pack.find_tile(key) else {
+            if let (Ok(tx), Ok(ty)) = (i32::try_from(tile_x0 + col), i32::try_from(tile_y0 + row)) {
+                let key = TileKey::new(tx, ty);
+                *f = self.pack.find_tile(key).map(|i| (key, i));
+            }
+        }
+        // Mark the cached ones used before fetching any other, so that a fetch evicts a tile
+        // outside this window, never one the window still needs.
+        for &(_, i) in found.iter().flatten() {
+            self.cache.touch(i);
+        }
+        // Resolve (verify, decode), then borrow the decoded slots for sampling.
+        let mut resolved = [Resolved::Missing; MAX_CROP_TILES];
+        for (slot, f) in resolved.iter_mut().zip(found) {
+            let Some((key, i)) = f else {
                 continue;
             };
             *slot = match self.cache.get_or_verify(&self.pack, i, self.pixels) {
@@ -539,7 +547,9 @@ impl<'a> PackSource<'a> {
         self.route = route;
     }
 
-    /// Verify uncached tiles within `reach_m` of `p`; true when the step's budget is spent.
+    /// Keep the cached tiles within `reach_m` of `p` (mark them used) and verify uncached ones
+    /// while the step's budget lasts and the cache has room beside this step's tiles. Never
+    /// ends the walk (false): every held tile ahead must be marked.
     fn prefetch_around(&mut self, p: DVec2, reach_m: f64, budget_start: usize) -> bool {
         let side_m = self.pack.tile_side_m();
         let lo = ((p - DVec2::splat(reach_m)) / side_m).floor();
@@ -557,18 +567,22 @@ impl<'a> PackSource<'a> {
         let (tx0, tx1, ty0, ty1) = (lo.x as i32, hi.x as i32, lo.y as i32, hi.y as i32);
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
-                if self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP {
-                    return true;
-                }
                 let Some(i) = self.pack.find_tile(TileKey::new(tx, ty)) else {
                     continue;
                 };
-                if self.cache.peek(i).is_none() {
-                    self.cache.get_or_verify(&self.pack, i, self.pixels);
+                // Tiles ahead already held are marked used even once the budget is spent, or
+                // the farthest would age out and be fetched again a few steps later.
+                if self.cache.touch(i).is_some()
+                    || self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP
+                {
+                    continue;
                 }
+                // `None`: the cache holds only this step's tiles, nothing more fits ahead; the
+                // walk goes on marking the held ones so that none of them ages out.
+                let _ = self.cache.prefetch(&self.pack, i, self.pixels);
             }
         }
-        self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP
+        false
     }
 }
 

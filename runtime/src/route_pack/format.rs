@@ -58,7 +58,6 @@ pub(crate) const OFF_INDEX_XXH3: usize = 64;
 /// Offset of the header checksum (covers bytes `[0, OFF_HEADER_XXH3)`).
 pub(crate) const OFF_HEADER_XXH3: usize = 72;
 
-
 /// A tile's position in the pack grid (see `FORMAT.md`). Ordered by `(tile_y, tile_x)`, the
 /// index order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

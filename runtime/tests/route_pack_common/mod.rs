@@ -33,7 +33,10 @@ pub fn draw_pack(
         .collect();
     let tiles: Vec<PackTile<'_>> = payloads
         .iter()
-        .map(|(key, rgb)| PackTile { key: *key, payload: rgb })
+        .map(|(key, rgb)| PackTile {
+            key: *key,
+            payload: rgb,
+        })
         .collect();
     let header = PackHeader {
         tile_size_px,
