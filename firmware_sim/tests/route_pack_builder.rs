@@ -374,7 +374,7 @@ fn build_pack_command_writes_a_loadable_pack() {
     };
     // A missing route names the file once, then the OS's reason.
     let missing = satmap_sim::cli::build_pack::Args {
-        route: dir.join("gone.geojson"),
+        route: Some(dir.join("gone.geojson")),
         tile_px: 64,
         ..bad.clone()
     };
@@ -390,7 +390,7 @@ fn build_pack_command_writes_a_loadable_pack() {
     // Numbers are checked before any file is read: a NaN gsd with a route that does not exist.
     let nan = satmap_sim::cli::build_pack::Args {
         gsd_m: f64::NAN,
-        route: dir.join("no_such_route.geojson"),
+        route: Some(dir.join("no_such_route.geojson")),
         ..bad
     };
     let err = satmap_sim::cli::build_pack::run(&nan).unwrap_err();

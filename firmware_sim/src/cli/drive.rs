@@ -96,10 +96,8 @@ fn parse_crop(text: &str) -> Result<CropSpec, String> {
         cols.parse().map_err(|_| bad())?,
     );
     let gsd_m: f64 = gsd.parse().map_err(|_| bad())?;
-    if !(1..=4096).contains(&rows)
-        || !(1..=4096).contains(&cols)
-        || !(gsd_m > 0.001 && gsd_m <= 100.0)
-    {
+    let sides_ok = (1..=4096).contains(&rows) && (1..=4096).contains(&cols);
+    if !(sides_ok && gsd_m > 0.001 && gsd_m <= 100.0) {
         return Err(format!(
             "{text}: sides 1..=4096 px, GSD in (0.001, 100] m/px"
         ));

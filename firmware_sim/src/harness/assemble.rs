@@ -125,6 +125,7 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             steps: 0,
             engine_max_per_step: 0,
             outside_engine_max_per_step: 0,
+            decoder_max_per_step: 0,
             peak_growth_bytes: 0,
         },
         degraded: DegradedReport::count(core::iter::empty(), m.cfg.max_degraded_share),

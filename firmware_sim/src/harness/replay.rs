@@ -156,7 +156,7 @@ pub fn replay(
                 satmap_runtime::route_pack::MAX_CROP_TILES
             ))
         })?;
-    let satellite = TimedSource::new(pack_source, frames);
+    let satellite = TimedSource::new(pack_source, frames, alloc);
     // The virtual clock sets the timestamps: a slow replay must not look like an outage.
     let limits = FrameLimits {
         max_timestamp_gap_us: FrameLimits::DEFAULT
@@ -235,6 +235,7 @@ pub fn replay(
         let fault = satmap.satellite_mut().inner().last_report().fault;
         let degraded_reason = DegradedReason::of(&health, fault);
         let engine_allocations = satmap.engine_mut().timings_mut().take_engine_allocations();
+        let decoder_allocations = satmap.satellite_mut().take_decoder_allocations();
         satmap
             .engine_mut()
             .timings_mut()
@@ -250,8 +251,9 @@ pub fn replay(
             latency_us,
             digest: map_digest,
             engine_allocations,
+            decoder_allocations,
             outside_engine_allocations: (after.allocations - before.allocations)
-                .saturating_sub(engine_allocations),
+                .saturating_sub(engine_allocations + decoder_allocations),
             arena_peak_bytes: peak_bytes,
             step_peak_bytes: after.peak_bytes,
             arena_current_bytes: after.current_bytes,

@@ -44,6 +44,9 @@ pub struct StepRecord {
     pub engine_allocations: usize,
     /// Allocations during the step outside graph engine calls (the runtime's own).
     pub outside_engine_allocations: usize,
+    /// Allocations made by the tile decoder while it decoded a compressed pack's tiles
+    /// (scratch returned within the decode), not counted in `outside_engine_allocations`.
+    pub decoder_allocations: usize,
     /// Arena peak since start-up, after this step, bytes.
     pub arena_peak_bytes: usize,
     /// Arena peak during this step alone, bytes (the harness restarts the peak before each
@@ -85,6 +88,8 @@ pub struct AllocationReport {
     pub engine_max_per_step: usize,
     /// Largest number of allocations outside the graph engine in one step.
     pub outside_engine_max_per_step: usize,
+    /// Most tile-decoder scratch allocations in one step after warm-up (compressed packs).
+    pub decoder_max_per_step: usize,
     /// Largest growth of a step's own arena peak ([`StepRecord::step_peak_bytes`]) over the
     /// last warm-up step's, bytes (0: the steady state allocates no more than warm-up did).
     pub peak_growth_bytes: usize,
@@ -159,6 +164,11 @@ impl Report {
             outside_engine_max_per_step: after
                 .iter()
                 .map(|s| s.outside_engine_allocations)
+                .max()
+                .unwrap_or(0),
+            decoder_max_per_step: after
+                .iter()
+                .map(|s| s.decoder_allocations)
                 .max()
                 .unwrap_or(0),
             peak_growth_bytes: after
@@ -314,8 +324,13 @@ impl Report {
         let _ = writeln!(
             s,
             "allocations/step   after {WARMUP_STEPS} warm-up steps ({} steps): outside the graph \
-             engine max {}, inside max {}; arena peak growth {} bytes",
-            al.steps, al.outside_engine_max_per_step, al.engine_max_per_step, al.peak_growth_bytes
+             engine max {}, inside max {}, tile decoder scratch max {}; arena peak growth {} \
+             bytes",
+            al.steps,
+            al.outside_engine_max_per_step,
+            al.engine_max_per_step,
+            al.decoder_max_per_step,
+            al.peak_growth_bytes
         );
         let d = &self.degraded;
         let _ = write!(

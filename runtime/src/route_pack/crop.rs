@@ -31,7 +31,9 @@ pub const FILL_RGB: [u8; 3] = [0, 0, 0];
 /// pack's resolution spans at most 3 x 3 tiles of 256 px at any yaw; 6 x 6 leaves room for
 /// smaller tiles or larger crops.
 pub const MAX_CROP_TILES: usize = 36;
-/// Most points sampled ahead along the route per step when choosing tiles to prefetch.
+/// Points sampled ahead along the route per step when choosing tiles to prefetch: every half
+/// tile over the next two tiles. Deeper lookahead outgrows a compressed pack's tile buffer
+/// (16 points, 8 tiles, decoded every tile 46 times over a 100 km replay instead of once).
 const MAX_PREFETCH_SAMPLES: usize = 4;
 
 /// Why a crop could not be attempted (the output is all fill and coverage is `None`).

@@ -2,12 +2,17 @@
 //!
 //! A pack is one binary image (byte layout in `FORMAT.md`, next to this file): a header with
 //! the route frame's WGS84 origin and the ground sampling distance, the route polyline, a sorted
-//! tile index with one xxh3-64 per tile, then raw RGB tile payloads already resampled into the
-//! route frame (local ENU at the origin), so the vehicle never projects per pixel.
+//! tile index with one xxh3-64 per tile, then the tile payloads already resampled into the
+//! route frame (local ENU at the origin), so the vehicle never projects per pixel. Version 1
+//! payloads are raw RGB, read in place; version 2 payloads are JPEG or zlib, checked, then
+//! decoded into a caller-owned tile buffer (`memory_layout.toml`, `region.tile_pixels`) when a
+//! tile is first needed, prefetched two tiles ahead along the route.
 //!
 //! - [`format`]: the zero-copy parser ([`RoutePack`]) that validates header and index at load.
 //! - [`writer`]: the encoder the host builder and tests use.
-//! - [`cache`]: the fixed-capacity cache of verified tiles ([`TILE_CACHE_TILES`]).
+//! - [`error`]: [`PackError`], why an image was refused.
+//! - [`codec`]: the tile codecs ([`TileCodec`]) and the no_std decoder ([`decode_tile`]).
+//! - [`cache`]: the fixed-capacity cache of verified (and decoded) tiles ([`TILE_CACHE_TILES`]).
 //! - [`crop`]: the ego-centred, yaw-rotated bilinear crop and [`PackSource`], the pack-backed
 //!   [`crate::satellite::SatelliteSource`], with route-ahead prefetch.
 //! - [`crop_bound`]: the tiles a crop spans, and [`crop_tile_bound`], the most at any pose
