@@ -135,7 +135,10 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     if e.downcast_ref::<BudgetExceeded>().is_some() {
         return EXIT_BUDGET_EXCEEDED;
     }
+    // A pack that cannot be built from the given route, imagery and options is bad input.
     if e.downcast_ref::<BadArgument>().is_some()
+        || e.downcast_ref::<crate::route_pack_builder::BuildError>()
+            .is_some()
         || matches!(
             e.downcast_ref::<crate::synth::SynthError>(),
             Some(crate::synth::SynthError::Config(_))
