@@ -5,8 +5,8 @@
 //! Routes run east along y = 0 with a point every metre; tiles are 64 px at 0.25 m/px (16 m),
 //! the pack corridor 20 m, so the capture radius is 10 + 16 = 26 m. A step's segments: the
 //! window (16 behind, the matched one, 128 ahead: 145), the sweep chunk while searching
-//! (4096), the prefetch walk (at most 128; exactly 128 where no tile lies ahead, since its
-//! 16 samples every 8 m would need 129).
+//! (4096), the prefetch walk (at most 128, `ROUTE_WALK_SEGMENTS`; its 4 samples every 8 m,
+//! two tiles ahead, end in the 33rd segment, so exactly 33 where no tile lies ahead).
 
 mod route_pack_common;
 
@@ -19,7 +19,11 @@ use satmap_runtime::route_pack::{
 use satmap_runtime::satellite::SatelliteSource;
 
 const WINDOW: u32 = 145;
-const WALK: u32 = 128;
+/// Segments the prefetch walk examines where no tile lies ahead: 4 samples 8 m apart on 1 m
+/// segments.
+const WALK: u32 = 33;
+/// The walk's bound, whatever the sampling.
+const WALK_CAP: u32 = satmap_runtime::route_pack::ROUTE_WALK_SEGMENTS as u32;
 const SWEEP: u32 = ROUTE_SWEEP_PER_STEP as u32;
 
 fn straight_route(points: usize) -> Vec<DVec2> {
@@ -112,7 +116,7 @@ fn a_vehicle_anywhere_on_a_long_route_is_reacquired_in_bounded_steps() {
         )
     );
     assert_eq!(
-        (WINDOW + SWEEP + WALK) as usize,
+        (WINDOW + SWEEP + WALK_CAP) as usize,
         MAX_ROUTE_SEGMENTS_PER_STEP
     );
     // Tracking again: the window only.
