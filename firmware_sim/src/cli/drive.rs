@@ -186,7 +186,7 @@ pub fn run(
         pack_compression: args.pack_codec.compression(args.jpeg_quality),
     };
     if let Some(pack_path) = &args.satellite_only {
-        return run_satellite_only(args, pack_path, rate_hz_of(args));
+        return run_satellite_only(args, pack_path, args.drive_hz);
     }
     if !init(arena_bytes) {
         return Err(BadArgument("the arena was already initialised".into()).into());
@@ -213,10 +213,6 @@ pub fn run(
             .into()),
         }
     })
-}
-
-fn rate_hz_of(args: &Args) -> f64 {
-    args.drive_hz
 }
 
 /// `--satellite-only`: the route replay, its report, and exit 4 when its worst step exceeds the
