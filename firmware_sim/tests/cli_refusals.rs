@@ -6,10 +6,12 @@
 //! the route-pack builder now refuses such tiles, so the pack here is of another place (every
 //! crop finds no coverage). The crop-fault reasons are covered by `harness::degraded`'s tests.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
+use common::run;
 use satmap_runtime::geo::Geodetic;
 use satmap_sim::harness::world_imagery::RasterImagery;
 use satmap_sim::harness::{EXIT_BAD_INPUT, EXIT_DEGRADED};
@@ -21,18 +23,6 @@ const FRAMES: usize = 3;
 
 fn bundle() -> &'static str {
     concat!(env!("CARGO_MANIFEST_DIR"), "/../models/bundles/test")
-}
-
-fn run(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_satmap-sim"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// The scenarios' drive: seed 7, [`FRAMES`] frames at 2 Hz.

@@ -3,21 +3,10 @@
 //! it and reports the worst step against the `satellite_crop` budget (exit 0 within it), and
 //! bad settings are refused as bad input (exit 2) before any work.
 
-use std::process::Command;
+mod common;
 
+use common::run;
 use satmap_sim::harness::EXIT_BAD_INPUT;
-
-fn run(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_satmap-sim"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 const BUNDLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/bundles/test");
 const CROP_03: [&str; 8] = [

@@ -18,6 +18,7 @@ use xxhash_rust::xxh3::Xxh3;
 use super::assemble::{ArenaSnapshots, Measured, assemble};
 use super::degraded::DegradedReason;
 use super::report::StepRecord;
+use super::route_replay::tile_buffer;
 use super::source::open_scenario;
 use super::timed_engine::{Timed, TimedEngine, micros_since};
 use super::timed_source::TimedSource;
@@ -134,16 +135,7 @@ pub fn replay(
     let engine = TimedEngine::new(engine, frames, alloc);
     let after_engine = stats_of(alloc);
     label(alloc, ArenaRegion::RuntimeRegions);
-    // The decoded-tile region, reserved once and only for a compressed pack (raw tiles are
-    // read in place).
-    let mut tile_pixels = vec![
-        0u8;
-        if pack.codec().needs_decode() {
-            layout::TILE_PIXELS_BYTES
-        } else {
-            0
-        }
-    ];
+    let mut tile_pixels = tile_buffer(&pack);
     let pack_source = PackSource::with_tile_buffer(pack, &mut tile_pixels);
     // A pack whose tiles are too small for the model's crop would fail every crop and run the
     // whole drive degraded: refuse it at load instead.

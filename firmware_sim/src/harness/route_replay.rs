@@ -105,6 +105,17 @@ impl RouteReplayReport {
     }
 }
 
+/// The decoded-tile region for `pack`, reserved once: `tile_pixels` of `memory_layout.toml` for
+/// a compressed pack, nothing for a raw one (its tiles are read in place).
+pub(super) fn tile_buffer(pack: &RoutePack<'_>) -> Vec<u8> {
+    let bytes = if pack.codec().needs_decode() {
+        layout::TILE_PIXELS_BYTES
+    } else {
+        0
+    };
+    vec![0u8; bytes]
+}
+
 /// Drive along `pack_bytes`'s route and time every crop.
 ///
 /// # Errors
@@ -134,14 +145,7 @@ pub fn replay_route(
     if route.len() < 2 || total_m <= 0.0 {
         return Err(HarnessError::Pack("the pack has no route to drive".into()));
     }
-    let mut tile_pixels = vec![
-        0u8;
-        if pack.codec().needs_decode() {
-            layout::TILE_PIXELS_BYTES
-        } else {
-            0
-        }
-    ];
+    let mut tile_pixels = tile_buffer(&pack);
     let mut source = PackSource::with_tile_buffer(pack, &mut tile_pixels);
     source
         .check_crop_spec(&cfg.crop)
