@@ -59,7 +59,14 @@ fn native_gather_sum_is_bit_identical_to_reference() {
         let weights = f.golden.f32s("gkt_weights");
         let want = f.golden.f32s("gathered");
         let mut got = vec![f32::NAN; want.len()];
-        gather_sum(&lut, &value, &weights, &mut got).unwrap();
+        gather_sum(
+            &lut,
+            &value,
+            &weights,
+            &mut got,
+            satmap_runtime::CameraMask::ALL,
+        )
+        .unwrap();
         let differing = got
             .iter()
             .zip(&want)

@@ -4,10 +4,11 @@ vectorised reference against a scalar loop written straight from ARCHITECTURE.md
 import math
 
 import numpy as np
+import pytest
 
 from satmap_ref.calibration import lidar2img_all, load_calibration, rotation_matrix_glam
 from satmap_ref.config import get_config
-from satmap_ref.gkt import bev_cell_centres, gather_sum
+from satmap_ref.gkt import bev_cell_centres, gather_sum, mask_cameras
 
 
 def test_quaternion_formula_is_a_rotation():
@@ -105,3 +106,81 @@ def test_round_half_even_is_used():
     # Python's round and numpy's rint both round half to even: the LUT's rule.
     assert np.rint(np.float32(2.5)) == 2.0 and np.rint(np.float32(3.5)) == 4.0
     assert round(2.5) == 2 and math.isclose(round(0.5), 0)
+
+
+def _value_weights(cfg, seed):
+    rng = np.random.default_rng(seed)
+    value = rng.standard_normal((6, cfg.feat_h * cfg.feat_w, cfg.embed_dims)).astype(np.float32)
+    w = rng.random((cfg.num_queries, 4, 15)).astype(np.float32)
+    return value, w
+
+
+def test_mask_cameras_all_present_is_bit_identical(cfg, lut):
+    full = mask_cameras(lut, np.ones(6, dtype=bool))
+    for k, v in lut.as_dict().items():
+        got = full.as_dict()[k]
+        assert got.dtype == v.dtype and np.array_equal(got, v), k
+    value, w = _value_weights(cfg, 7)
+    ref = gather_sum(value, w, lut)
+    for out in (gather_sum(value, w, full), gather_sum(value, w, lut, camera_ok=[True] * 6)):
+        assert out.tobytes() == ref.tobytes()
+
+
+@pytest.mark.parametrize("c", range(6))
+def test_mask_cameras_counts(lut, c):
+    ok = np.ones(6, dtype=bool)
+    ok[c] = False
+    m = mask_cameras(lut, ok)
+    assert m.count.dtype == np.int32 and m.mask.dtype == np.uint8 and m.index.dtype == np.int32
+    assert np.array_equal(m.count, lut.count - lut.mask[c].astype(np.int32))
+    assert np.array_equal(m.count, m.mask.astype(np.int32).sum(0))
+    assert not m.mask[c].any() and np.all(m.index[c] == -1)
+    keep = np.arange(6) != c
+    assert np.array_equal(m.mask[keep], lut.mask[keep])
+    assert np.array_equal(m.index[keep], lut.index[keep])
+    # The input LUT is not modified.
+    assert np.array_equal(lut.count, lut.mask.astype(np.int32).sum(0)) and lut.mask[c].any()
+
+
+def test_mask_cameras_front_only(lut):
+    m = mask_cameras(lut, np.array([True, False, False, False, False, False]))
+    assert np.array_equal(m.count, lut.mask[0].astype(np.int32))
+    assert not m.mask[1:].any()
+
+
+def test_mask_cameras_rejects_wrong_length(lut):
+    with pytest.raises(ValueError):
+        mask_cameras(lut, np.ones(5, dtype=bool))
+
+
+@pytest.mark.parametrize("c", range(6))
+def test_dropped_camera_value_is_never_read(cfg, lut, c):
+    value, w = _value_weights(cfg, 8 + c)
+    ok = np.ones(6, dtype=bool)
+    ok[c] = False
+    clean = gather_sum(value, w, lut, camera_ok=ok)
+    poisoned = value.copy()
+    poisoned[c] = np.nan
+    out = gather_sum(poisoned, w, lut, camera_ok=ok)
+    assert np.isfinite(out).all()
+    assert out.tobytes() == clean.tobytes()
+    m = mask_cameras(lut, ok)
+    # Dropout changes exactly the queries camera c took part in; where no present camera is
+    # left the row is 0 (acc 0 divided by max(1, 0)).
+    full = gather_sum(value, w, lut)
+    seen = lut.mask[c].astype(bool)
+    assert np.array_equal(out[~seen], full[~seen])
+    assert np.all(np.any(out[seen] != full[seen], axis=1))
+    assert np.all(out[m.count == 0] == 0)
+    # The masked result is the scalar loop of ARCHITECTURE.md over present cameras only.
+    rng = np.random.default_rng(c)
+    for q in rng.choice(np.nonzero(seen)[0], 10, replace=False):
+        acc = np.zeros(32, dtype=np.float32)
+        for cc in range(6):
+            if not (lut.mask[cc, q] and ok[cc]):
+                continue
+            for k in range(4):
+                for p in range(15):
+                    row = value[cc][lut.index[cc, q, k, p], k * 8:(k + 1) * 8]
+                    acc[k * 8:(k + 1) * 8] = acc[k * 8:(k + 1) * 8] + w[q, k, p] * row
+        assert np.array_equal(out[q], acc / np.float32(max(1, m.count[q]))), q

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 from safetensors.numpy import load_file
 
-from satmap_ref.export import stage_io
-from satmap_ref.frames import decode
-from satmap_ref.golden import MODELS_ROOT, generate, golden_paths
+from satmap_ref.export import StagedRunner, stage_io
+from satmap_ref.frames import Frame, decode
+from satmap_ref.golden import (DROPOUT_FILE, DROPOUT_KEYS, MODELS_ROOT, dropout_configs,
+                               dropout_tensors, generate, golden_frame, golden_paths)
+from satmap_ref.gkt import GktLut
 from satmap_ref.model import STAGE_NAMES
 
 
@@ -95,3 +97,88 @@ def test_golden_lut_layout():
     assert lut["count"].dtype == np.int32 and lut["count"].shape == (3200,)
     assert lut["index"].dtype == np.int32 and lut["index"].shape == (6, 3200, 4, 15)
     assert lut["lidar2img"].dtype == np.float32 and lut["lidar2img"].shape == (6, 4, 4)
+
+
+GOLDEN = MODELS_ROOT / "golden" / "test"
+DROPOUT_PREFIXES = [f"cam{c}" for c in range(6)] + ["front_only"]
+DROPOUT_SPEC = {
+    "count": (np.int32, [3200]),
+    "gathered": (np.float32, [3200, 32]),
+    "camera_bev": (np.float32, [80, 40, 32]),
+    "class_logits": (np.float32, [50, 3]),
+    "points": (np.float32, [50, 20, 2]),
+}
+
+
+@pytest.fixture(scope="module")
+def committed_runner(cfg):
+    return StagedRunner(cfg, MODELS_ROOT / "bundles" / "test")
+
+
+@pytest.fixture(scope="module")
+def committed_lut():
+    return GktLut(**load_file(str(GOLDEN / "lut.safetensors")))
+
+
+def test_dropout_configs(cfg):
+    confs = dropout_configs(cfg.cameras)
+    assert list(confs) == DROPOUT_PREFIXES
+    for c in range(6):
+        assert np.array_equal(confs[f"cam{c}"], np.arange(6) != c)
+    assert cfg.cameras[0] == "CAM_FRONT"
+    assert np.array_equal(confs["front_only"], np.arange(6) == 0)
+
+
+def test_golden_dropout_layout(committed_lut):
+    dr = load_file(str(MODELS_ROOT / DROPOUT_FILE))
+    assert set(dr) == {f"{p}_{k}" for p in DROPOUT_PREFIXES for k in DROPOUT_KEYS}
+    assert set(DROPOUT_KEYS) == set(DROPOUT_SPEC)
+    for p in DROPOUT_PREFIXES:
+        for k, (dt, shape) in DROPOUT_SPEC.items():
+            t = dr[f"{p}_{k}"]
+            assert t.dtype == dt and list(t.shape) == shape, (p, k)
+    lut = committed_lut
+    for c in range(6):
+        assert np.array_equal(dr[f"cam{c}_count"], lut.count - lut.mask[c].astype(np.int32))
+    assert np.array_equal(dr["front_only_count"], lut.mask[0].astype(np.int32))
+    # Dropout changes every stage's output against the all-camera frame 0.
+    f0 = load_file(str(GOLDEN / "frame_000.safetensors"))
+    for p in DROPOUT_PREFIXES:
+        for k in ("gathered", "camera_bev", "class_logits", "points"):
+            assert np.abs(dr[f"{p}_{k}"] - f0[k]).max() > 1e-2, (p, k)
+            assert np.isfinite(dr[f"{p}_{k}"]).all(), (p, k)
+
+
+def test_committed_dropout_is_current(cfg, committed_runner, committed_lut):
+    """A fresh computation from the committed bundle, LUT and frame-0 inputs gives the committed
+    `dropout.safetensors` bit for bit (the full regeneration check is
+    `test_committed_goldens_are_current`)."""
+    fresh = dropout_tensors(committed_runner, golden_frame(cfg, 0, MODELS_ROOT), committed_lut)
+    dr = load_file(str(MODELS_ROOT / DROPOUT_FILE))
+    assert set(fresh) == set(dr)
+    stale = [k for k in dr if fresh[k].dtype != dr[k].dtype or fresh[k].tobytes() != dr[k].tobytes()]
+    assert not stale, f"stale dropout goldens (run `python -m satmap_ref.golden`): {stale}"
+
+
+def test_staged_all_cameras_present_is_frame_000(cfg, committed_runner, committed_lut):
+    f0 = load_file(str(GOLDEN / "frame_000.safetensors"))
+    out = committed_runner.run_frame(golden_frame(cfg, 0, MODELS_ROOT), committed_lut,
+                                     camera_ok=np.ones(6, dtype=bool))
+    for k in ("value", "gathered", "camera_bev", "class_logits", "points",
+              "degraded_class_logits", "degraded_points"):
+        assert out[k].tobytes() == f0[k].tobytes(), k
+
+
+def test_staged_dropped_camera_image_is_not_used(cfg, committed_runner, committed_lut):
+    """The dropped camera's image encoder is not run: replacing its image changes nothing."""
+    fr = golden_frame(cfg, 0, MODELS_ROOT)
+    images = fr.images.copy()
+    images[3] = np.random.default_rng(0).integers(0, 256, images[3].shape, dtype=np.uint8)
+    other = Frame(images, fr.satellite, fr.ego_yaw_rad, fr.acceleration_mps2,
+                  fr.rotation_rate_radps, fr.velocity_mps)
+    ok = np.arange(6) != 3
+    dr = load_file(str(MODELS_ROOT / DROPOUT_FILE))
+    out = committed_runner.run_frame(other, committed_lut, camera_ok=ok)
+    assert not out["value"][3].any()
+    for k in ("gathered", "camera_bev", "class_logits", "points"):
+        assert out[k].tobytes() == dr[f"cam3_{k}"].tobytes(), k

@@ -36,8 +36,14 @@ fn bench(c: &mut Criterion) {
         let mut out = vec![0.0f32; dims.bev_len()];
         c.bench_function(&format!("gather_sum/{name}"), |b| {
             b.iter(|| {
-                gather_sum(&lut, black_box(&values), black_box(&weights), &mut out)
-                    .expect("sizes match");
+                gather_sum(
+                    &lut,
+                    black_box(&values),
+                    black_box(&weights),
+                    &mut out,
+                    satmap_runtime::CameraMask::ALL,
+                )
+                .expect("sizes match");
                 black_box(&out);
             });
         });

@@ -125,6 +125,8 @@ fn bench(c: &mut Criterion) {
                         width_px,
                         height_px,
                         rgb: &image,
+                        capture_us: 0,
+                        valid: true,
                     })
                 }),
             };

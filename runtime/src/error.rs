@@ -3,10 +3,11 @@
 
 use core::fmt;
 
-use crate::calibration::CalibrationFault;
+use crate::calibration::{CalibrationFault, NUM_CAMERAS};
 use crate::engine::{EngineError, Stage};
-use crate::frame::Axis;
+use crate::frame::{Axis, CameraState};
 use crate::gkt::KernelError;
+use crate::step::StepSlice;
 
 /// Why the runtime could not be created or recalibrated.
 ///
@@ -32,6 +33,13 @@ pub enum InitError {
         needed_bytes: usize,
         /// Capacity of the region, bytes.
         capacity_bytes: usize,
+    },
+    /// A caller-placed region does not start on the alignment the runtime needs.
+    RegionMisaligned {
+        /// Region name, as in `memory_layout.toml`.
+        region: &'static str,
+        /// Required alignment, bytes.
+        align: usize,
     },
     /// A fixed buffer could not be reserved.
     OutOfMemory {
@@ -66,6 +74,9 @@ impl fmt::Display for InitError {
                 "region `{region}` does not fit: the model needs {needed_bytes} bytes, \
                  memory_layout.toml gives {capacity_bytes}"
             ),
+            Self::RegionMisaligned { region, align } => {
+                write!(f, "region `{region}` must start on a {align}-byte boundary")
+            }
             Self::OutOfMemory { bytes } => write!(f, "cannot reserve a buffer of {bytes} bytes"),
             Self::InvalidLimits { field } => {
                 write!(f, "frame limit `{field}` must be positive and not NaN")
@@ -79,9 +90,10 @@ impl core::error::Error for InitError {
         match self {
             Self::Dims(e) => Some(e),
             Self::InvalidCalibration { fault, .. } => Some(fault),
-            Self::RegionTooSmall { .. } | Self::OutOfMemory { .. } | Self::InvalidLimits { .. } => {
-                None
-            }
+            Self::RegionTooSmall { .. }
+            | Self::RegionMisaligned { .. }
+            | Self::OutOfMemory { .. }
+            | Self::InvalidLimits { .. } => None,
         }
     }
 }
@@ -187,10 +199,30 @@ pub enum StepError {
         /// The largest accepted magnitude, m/s.
         limit_mps: f32,
     },
-    /// A camera delivered no image.
-    MissingCamera {
-        /// Camera index (model order).
-        camera: usize,
+    /// Every camera is missing, stale or invalid: nothing is left to see the road with.
+    NoCameraLeft {
+        /// Why each camera was left out, model order.
+        states: [CameraState; NUM_CAMERAS],
+    },
+    /// A frame arrived while a staged step (`SatMap::step_begin`) is still in progress; the
+    /// frame is refused and the staged step continues.
+    StepInProgress {
+        /// Sequence counter of the frame being stepped.
+        sequence: u64,
+    },
+    /// `step_run_next` or `step_finish` without a staged step in progress.
+    NoStepInProgress,
+    /// `step_finish` before every slice ran.
+    StepIncomplete {
+        /// The next slice to run.
+        next: StepSlice,
+    },
+    /// `step_run_next` was given another frame than the one `step_begin` checked.
+    FrameMismatch {
+        /// Sequence counter of the frame being stepped.
+        expected_sequence: u64,
+        /// Sequence counter given.
+        got_sequence: u64,
     },
     /// A camera image has the wrong size.
     WrongImageSize {
@@ -295,7 +327,24 @@ impl fmt::Display for StepError {
                 f,
                 "ego velocity {axis} = {value_mps:e} m/s is beyond +-{limit_mps:e} m/s"
             ),
-            Self::MissingCamera { camera } => write!(f, "camera {camera} delivered no image"),
+            Self::NoCameraLeft { states } => {
+                write!(f, "no camera left for this step (states {states:?})")
+            }
+            Self::StepInProgress { sequence } => write!(
+                f,
+                "frame refused: the staged step of frame {sequence} is still in progress"
+            ),
+            Self::NoStepInProgress => f.write_str("no staged step in progress"),
+            Self::StepIncomplete { next } => {
+                write!(f, "staged step not finished: slice {next:?} still to run")
+            }
+            Self::FrameMismatch {
+                expected_sequence,
+                got_sequence,
+            } => write!(
+                f,
+                "staged step of frame {expected_sequence} given frame {got_sequence}"
+            ),
             Self::WrongImageSize {
                 camera,
                 expected_width_px,

@@ -25,6 +25,92 @@ pub struct CameraImage<'a> {
     pub height_px: u32,
     /// `height_px * width_px * 3` bytes, row-major, RGB.
     pub rgb: &'a [u8],
+    /// Capture time, microseconds, on the clock of [`Frame::timestamp_us`]: an image older than
+    /// [`FrameLimits::max_camera_age_us`] is stale and left out of the step.
+    pub capture_us: u64,
+    /// The camera's own verdict on this image (ISP / link diagnostics, blockage detection):
+    /// `false` leaves it out of the step.
+    pub valid: bool,
+}
+
+/// How one camera took part in a step (the per-camera field of the map's health).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum CameraState {
+    /// Its image was encoded and summed.
+    #[default]
+    Used = 0,
+    /// It delivered no image (`None`).
+    Missing = 1,
+    /// Its image was older than [`FrameLimits::max_camera_age_us`].
+    Stale = 2,
+    /// Marked invalid by the camera ([`CameraImage::valid`] false), or captured after the
+    /// frame's own timestamp (a clock fault).
+    Invalid = 3,
+}
+
+/// The cameras that take part in a step, bit `c` for camera `c` (model order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CameraMask(u8);
+
+impl CameraMask {
+    /// Every camera.
+    pub const ALL: Self = Self((1 << NUM_CAMERAS) - 1);
+    /// No camera.
+    pub const NONE: Self = Self(0);
+
+    /// The cameras whose bits are set in `bits` (bits beyond the rig are ignored).
+    #[must_use]
+    pub const fn from_bits(bits: u8) -> Self {
+        Self(bits & Self::ALL.0)
+    }
+
+    /// Only `camera` (none when out of range).
+    #[must_use]
+    pub const fn only(camera: usize) -> Self {
+        if camera < NUM_CAMERAS {
+            Self(1 << camera)
+        } else {
+            Self::NONE
+        }
+    }
+
+    /// The mask as bits.
+    #[must_use]
+    pub const fn bits(self) -> u8 {
+        self.0
+    }
+
+    /// True when `camera` takes part.
+    #[must_use]
+    pub const fn contains(self, camera: usize) -> bool {
+        camera < NUM_CAMERAS && self.0 & (1 << camera) != 0
+    }
+
+    /// This mask without `camera`.
+    #[must_use]
+    pub const fn without(self, camera: usize) -> Self {
+        if camera < NUM_CAMERAS {
+            Self(self.0 & !(1 << camera))
+        } else {
+            self
+        }
+    }
+
+    /// Cameras that take part.
+    #[must_use]
+    pub const fn count(self) -> u32 {
+        self.0.count_ones()
+    }
+}
+
+/// Outcome of the camera checks of one frame: which cameras take part and why the others don't.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CameraUse {
+    /// Cameras summed by the view transform.
+    pub mask: CameraMask,
+    /// Each camera's state, model order.
+    pub states: [CameraState; NUM_CAMERAS],
 }
 
 /// The input of one step.
@@ -115,6 +201,10 @@ pub struct FrameLimits {
     /// Largest `|component|` of the rotation rate, rad/s. Default 10 (about 570 deg/s, well
     /// past a spinning car).
     pub max_abs_rotation_rate_radps: f32,
+    /// Largest accepted age of a camera image, `timestamp_us - capture_us`, µs, at least 1.
+    /// Default 250_000: half a period of a 2 Hz rig; an older image shows another place and is
+    /// left out ([`CameraState::Stale`]).
+    pub max_camera_age_us: u64,
 }
 
 impl FrameLimits {
@@ -127,6 +217,7 @@ impl FrameLimits {
         max_abs_velocity_mps: 100.0,
         max_abs_acceleration_mps2: 100.0,
         max_abs_rotation_rate_radps: 10.0,
+        max_camera_age_us: 250_000,
     };
 
     /// Check the limits themselves: gaps at least 1, float bounds positive and not NaN (a NaN
@@ -157,6 +248,9 @@ impl FrameLimits {
         if self.max_abs_rotation_rate_radps.is_nan() || self.max_abs_rotation_rate_radps <= 0.0 {
             return bad("max_abs_rotation_rate_radps");
         }
+        if self.max_camera_age_us == 0 {
+            return bad("max_camera_age_us");
+        }
         Ok(())
     }
 }
@@ -171,9 +265,15 @@ impl Default for FrameLimits {
 ///
 /// Order of checks: sequence (increasing, then gap), timestamp (increasing, then gap), pose
 /// (finite, then position x, y and yaw ranges), motion (finite, then acceleration, rotation
-/// rate and velocity ranges, each x, y, z), then each camera in model order (missing, size,
-/// byte length). Nothing is adopted here: the caller records the frame only once the whole step
-/// succeeded.
+/// rate and velocity ranges, each x, y, z), then each camera in model order (size and byte
+/// length of every delivered image, then missing / invalid / stale). Nothing is adopted here:
+/// the caller records the frame only once the whole step succeeded.
+///
+/// A camera that delivered nothing, marked its image invalid or delivered a stale one is left
+/// out of the step (its [`CameraState`] says why); a delivered image of the wrong size or byte
+/// length is an integration fault and fails the frame. A frame with no camera left fails with
+/// [`StepError::NoCameraLeft`]: a map drawn from the satellite tile alone would pass for live
+/// perception.
 ///
 /// # Errors
 /// The first failed check, as its own [`StepError`] variant with context.
@@ -182,15 +282,21 @@ pub fn check_frame(
     dims: &ModelDims,
     limits: &FrameLimits,
     last: Option<LastStep>,
-) -> Result<(), StepError> {
+) -> Result<CameraUse, StepError> {
     if let Some(last) = last {
         check_counters(frame, limits, last)?;
     }
     check_pose(&frame.pose, limits)?;
     check_motion(&frame.motion, limits)?;
+    let mut cameras = CameraUse {
+        mask: CameraMask::ALL,
+        states: [CameraState::Used; NUM_CAMERAS],
+    };
     for (camera, image) in frame.images.iter().enumerate() {
         let Some(image) = image else {
-            return Err(StepError::MissingCamera { camera });
+            cameras.mask = cameras.mask.without(camera);
+            cameras.states[camera] = CameraState::Missing;
+            continue;
         };
         let (w, h) = (image.width_px as usize, image.height_px as usize);
         if (w, h) != (dims.image_w, dims.image_h) {
@@ -209,8 +315,24 @@ pub fn check_frame(
                 got_bytes: image.rgb.len(),
             });
         }
+        let state = if !image.valid || image.capture_us > frame.timestamp_us {
+            CameraState::Invalid
+        } else if frame.timestamp_us - image.capture_us > limits.max_camera_age_us {
+            CameraState::Stale
+        } else {
+            CameraState::Used
+        };
+        if state != CameraState::Used {
+            cameras.mask = cameras.mask.without(camera);
+            cameras.states[camera] = state;
+        }
     }
-    Ok(())
+    if cameras.mask == CameraMask::NONE {
+        return Err(StepError::NoCameraLeft {
+            states: cameras.states,
+        });
+    }
+    Ok(cameras)
 }
 
 /// Sequence and timestamp against the last successful step.

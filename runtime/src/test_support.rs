@@ -217,6 +217,8 @@ impl Images {
                 width_px: self.dims.image_w as u32,
                 height_px: self.dims.image_h as u32,
                 rgb: &self.rgb[c * len..(c + 1) * len],
+                capture_us: 1_000_000 + sequence * 100_000,
+                valid: true,
             })
         });
         Frame {
@@ -295,4 +297,13 @@ pub(crate) fn count_allocations<R>(f: impl FnOnce() -> R) -> (R, usize) {
     let r = f();
     COUNTING.with(|on| on.set(false));
     (r, ALLOCATIONS.with(Cell::get))
+}
+
+/// Move `frame` to `timestamp_us` with its cameras (captured at the same instant, so none is
+/// stale).
+pub(crate) fn retime(frame: &mut Frame<'_>, timestamp_us: u64) {
+    frame.timestamp_us = timestamp_us;
+    for image in frame.images.iter_mut().flatten() {
+        image.capture_us = timestamp_us;
+    }
 }

@@ -143,6 +143,8 @@ impl GoldenFrame {
                     width_px,
                     height_px,
                     rgb: &self.images[c * per..(c + 1) * per],
+                    capture_us: 1_000_000 + sequence * 100_000,
+                    valid: true,
                 })
             }),
         }

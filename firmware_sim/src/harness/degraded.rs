@@ -162,6 +162,7 @@ mod tests {
             satellite,
             degraded,
             deadline_overrun: false,
+            cameras: Default::default(),
         }
     }
 

@@ -193,9 +193,10 @@ pub fn replay(
         let fix = world.enu_to_geodetic(glam::DVec3::new(p.x, p.y, 0.0));
         let pose = pack.pose_from_wgs84(&fix, compass_deg);
         let image_bytes = dims.image_bytes();
+        let timestamp_us = START_TIMESTAMP_US + k as u64 * period_us;
         let frame = Frame {
             sequence: k as u64 + 1,
-            timestamp_us: START_TIMESTAMP_US + k as u64 * period_us,
+            timestamp_us,
             pose,
             motion: sensor.motion,
             images: core::array::from_fn(|c| {
@@ -203,6 +204,9 @@ pub fn replay(
                     width_px: dims.image_w as u32,
                     height_px: dims.image_h as u32,
                     rgb: &images[c * image_bytes..(c + 1) * image_bytes],
+                    // The synthetic rig captures every camera at the frame's time.
+                    capture_us: timestamp_us,
+                    valid: true,
                 })
             }),
         };

@@ -21,7 +21,7 @@ from safetensors.torch import load_file as load_torch_file
 from .calibration import DEFAULT_CALIBRATION, lidar2img_all, load_calibration
 from .config import SatMapConfig, get_config
 from .frames import Frame, can_bus, synthetic_frame
-from .gkt import GktLut, build_lut, gather_sum
+from .gkt import GktLut, build_lut, camera_ok_array, gather_sum
 from .model import STAGE_NAMES, SatMap, build_model
 
 OPSET = 17
@@ -175,12 +175,24 @@ class StagedRunner:
         res = self.sessions[stage].run([n for n, _, _ in outs], inputs)
         return {n: r for (n, _, _), r in zip(outs, res)}
 
-    def run_frame(self, frame: Frame, lut: GktLut) -> dict[str, np.ndarray]:
+    def run_frame(self, frame: Frame, lut: GktLut,
+                  camera_ok: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Every interface tensor of one frame, plus `<stage>.<io>` records of each stage call
-        (image encoder recorded for camera 0)."""
+        (image encoder recorded for camera 0).
+        `camera_ok` (bool [C], optional): camera dropout. A dropped camera's image encoder is not
+        run (its `value` row is zeros, never read) and the gather-sum leaves it out
+        (`gkt.mask_cameras`: mask row 0, count recomputed); the image-encoder record is then
+        absent when camera 0 is dropped. None = every camera present (the same bits as before)."""
+        n_cams = frame.images.shape[0]
+        ok = (np.ones(n_cams, dtype=bool) if camera_ok is None
+              else camera_ok_array(camera_ok, n_cams))
         rec: dict[str, np.ndarray] = {}
         values = []
-        for c in range(frame.images.shape[0]):
+        for c in range(n_cams):
+            if not ok[c]:
+                values.append(np.zeros((self.cfg.feat_h * self.cfg.feat_w, self.cfg.embed_dims),
+                                       dtype=np.float32))
+                continue
             img = np.ascontiguousarray(frame.images[c])
             ci = np.array([c], dtype=np.int64)
             v = self.run_stage("image_encoder", image=img, camera_index=ci)["value"]
@@ -193,7 +205,8 @@ class StagedRunner:
         bq = self.run_stage("bev_query", can_bus=cb)
         rec.update({"bev_query.can_bus": cb, "bev_query.bev_query": bq["bev_query"],
                     "bev_query.gkt_weights": bq["gkt_weights"]})
-        gathered = gather_sum(value, bq["gkt_weights"], lut)
+        gathered = gather_sum(value, bq["gkt_weights"], lut,
+                              camera_ok=None if camera_ok is None else ok)
         cam = self.run_stage("bev_encoder", bev_query=bq["bev_query"], gathered=gathered)
         rec.update({"bev_encoder.bev_query": bq["bev_query"], "bev_encoder.gathered": gathered,
                     "bev_encoder.camera_bev": cam["camera_bev"]})

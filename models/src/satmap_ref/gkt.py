@@ -110,11 +110,37 @@ def build_lut(cfg: SatMapConfig, lidar2img: np.ndarray) -> GktLut:
     return GktLut(mask=mask, count=count, index=index, lidar2img=lidar2img)
 
 
-def gather_sum(value: np.ndarray, weights: np.ndarray, lut: GktLut) -> np.ndarray:
+def camera_ok_array(camera_ok, n_cams: int) -> np.ndarray:
+    """`camera_ok` as a bool array [n_cams] (True = camera present), checked for length."""
+    ok = np.asarray(camera_ok, dtype=bool).reshape(-1)
+    if ok.shape != (n_cams,):
+        raise ValueError(f"camera_ok has {ok.size} entries, the LUT has {n_cams} cameras")
+    return ok
+
+
+def mask_cameras(lut: GktLut, camera_ok) -> GktLut:
+    """The LUT with the cameras where `camera_ok` (bool [C]) is False left out: their `mask` row
+    becomes 0, their `index` row -1 (the dense form's "does not take part"), and `count` is
+    recomputed from the masked mask (count[q] = participating and present cameras, as
+    `build_lut` counts). With every camera present the arrays are equal to `lut`'s, so
+    `gather_sum` gives the same bits. `lidar2img` is kept."""
+    ok = camera_ok_array(camera_ok, lut.mask.shape[0])
+    mask = np.where(ok[:, None], lut.mask, np.uint8(0)).astype(np.uint8)
+    index = np.where(ok[:, None, None, None], lut.index, np.int32(-1)).astype(np.int32)
+    count = mask.astype(np.int32).sum(axis=0).astype(np.int32)
+    return GktLut(mask=mask, count=count, index=index, lidar2img=lut.lidar2img)
+
+
+def gather_sum(value: np.ndarray, weights: np.ndarray, lut: GktLut,
+               camera_ok=None) -> np.ndarray:
     """Reference GKT gather-sum. `value` f32 [C, feat_h*feat_w, D]; `weights` f32 [Q, heads, P].
     For every q: acc = 0; for each participating camera c, head k, kernel point p (this order):
     acc[k-channels] += w[q,k,p] * value[c][index[c,q,k,p], k-channels] (multiply, then add);
-    finally gathered[q] = acc / f32(max(1, count[q])). Returns f32 [Q, D]."""
+    finally gathered[q] = acc / f32(max(1, count[q])). Returns f32 [Q, D].
+    `camera_ok` (bool [C], optional): camera dropout, the gather-sum over `mask_cameras(lut,
+    camera_ok)`; a dropped camera's `value[c]` is never read (it may hold anything, NaN too)."""
+    if camera_ok is not None:
+        lut = mask_cameras(lut, camera_ok)
     value = np.asarray(value, dtype=np.float32)
     weights = np.asarray(weights, dtype=np.float32)
     n_cams, _, d = value.shape

@@ -1,12 +1,14 @@
 """Regenerates the committed `test` artefacts bit for bit from committed inputs: the bundle
 (`bundles/test/`: five ONNX stages, manifest, reference.safetensors) and the golden vectors
-(`golden/test/`: lut.safetensors, frame_000/001.safetensors).
+(`golden/test/`: lut.safetensors, frame_000/001.safetensors, dropout.safetensors).
 
 The weights are the committed trained camera + satellite model (`weights/test_sat.safetensors`,
 made by `python -m satmap_ref.train`), or the seeded initialisation where that file is absent.
 Frame 0 is a real frame of a held-out synthetic drive (`golden/test/input_frame.safetensors`,
 taken once from a dataset with `--take-input DATA`), so the goldens show the trained network
 making a map; frame 1 is the seeded pattern frame whose heading wraps past 2 pi.
+`dropout.safetensors` is frame 0 again with cameras dropped (`dropout_tensors`): each camera
+dropped alone, and every camera but the front one dropped.
 CLI: `python -m satmap_ref.golden` (writes under `models/`), or `--root DIR`; `--weights W` for
 other weights."""
 
@@ -22,7 +24,7 @@ from .calibration import DEFAULT_CALIBRATION, lidar2img_all, load_calibration
 from .config import get_config
 from .export import StagedRunner, export_bundle
 from .frames import Frame, decode, synthetic_frame
-from .gkt import build_lut
+from .gkt import GktLut, build_lut, mask_cameras
 
 MODELS_ROOT = Path(__file__).resolve().parents[2]
 GOLDEN_CONFIG = "test"
@@ -31,6 +33,9 @@ DEFAULT_WEIGHTS = MODELS_ROOT / "weights" / "test_sat.safetensors"
 INPUT_FRAME = Path("golden") / GOLDEN_CONFIG / "input_frame.safetensors"
 # The held-out frame the goldens start from: test-split drive 3000, frame 12.
 INPUT_SEED, INPUT_INDEX = 3000, 12
+DROPOUT_FILE = Path("golden") / GOLDEN_CONFIG / "dropout.safetensors"
+# Stage outputs stored per dropout configuration, as `<prefix>_<key>`.
+DROPOUT_KEYS = ("count", "gathered", "camera_bev", "class_logits", "points")
 
 
 def take_input(data: Path, root: Path = MODELS_ROOT) -> Path:
@@ -78,7 +83,39 @@ def golden_paths(root: Path) -> list[Path]:
     files = [b / f"{s}.onnx" for s in stages] + [b / "manifest.toml", b / "manifest.sha256",
                                                 b / "reference.safetensors"]
     files += [g / "lut.safetensors"] + [g / f"frame_{i:03d}.safetensors" for i in range(N_FRAMES)]
+    files += [DROPOUT_FILE]
     return files
+
+
+def dropout_configs(cameras: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The camera-dropout configurations of `dropout.safetensors`, prefix -> camera_ok (bool
+    [n_cams]), for the rig's camera names in camera-index order: `cam<c>` = camera c dropped
+    alone; `front_only` = only CAM_FRONT (camera 0) present, the monocular front + satellite
+    configuration."""
+    n_cams = len(cameras)
+    out = {}
+    for c in range(n_cams):
+        ok = np.ones(n_cams, dtype=bool)
+        ok[c] = False
+        out[f"cam{c}"] = ok
+    front = np.zeros(n_cams, dtype=bool)
+    front[cameras.index("CAM_FRONT")] = True
+    out["front_only"] = front
+    return out
+
+
+def dropout_tensors(runner: StagedRunner, frame: Frame, lut: GktLut) -> dict[str, np.ndarray]:
+    """Per dropout configuration (`dropout_configs`): the masked per-query camera count
+    (`<prefix>_count` i32 [Q]) and the staged pipeline's `gathered`, `camera_bev`,
+    `class_logits`, `points` with those cameras dropped (`StagedRunner.run_frame(...,
+    camera_ok)`; the satellite branch as in the frame goldens)."""
+    tensors = {}
+    for prefix, ok in dropout_configs(runner.cfg.cameras).items():
+        out = runner.run_frame(frame, lut, camera_ok=ok)
+        out["count"] = mask_cameras(lut, ok).count
+        for k in DROPOUT_KEYS:
+            tensors[f"{prefix}_{k}"] = np.ascontiguousarray(out[k])
+    return tensors
 
 
 def generate(root: Path = MODELS_ROOT, weights: Path | None = None) -> None:
@@ -111,6 +148,12 @@ def generate(root: Path = MODELS_ROOT, weights: Path | None = None) -> None:
         }
         save_file({k: np.ascontiguousarray(v) for k, v in tensors.items()},
                   str(gdir / f"frame_{i:03d}.safetensors"))
+    save_file(dropout_tensors(runner, golden_frame(cfg, 0, inputs_root), lut),
+              str(root / DROPOUT_FILE),
+              # One key: safetensors writes metadata from a hash map, so several keys would come
+              # out in a varying order and the file would not be bit-reproducible.
+              metadata={"source": "frame_000.safetensors inputs; cam<c>: camera c dropped alone; "
+                                  "front_only: only camera 0 (CAM_FRONT) present"})
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -126,7 +126,15 @@ pub extern "C" fn satmap_nostd_check() -> u64 {
     let values = alloc::vec![0.25f32; NUM_CAMERAS * dims.value_len()];
     let weights = alloc::vec![1.0f32 / 15.0; dims.weights_len()];
     let mut gathered = alloc::vec![0.0f32; dims.bev_len()];
-    if gather_sum(&lut, &values, &weights, &mut gathered).is_err() {
+    if gather_sum(
+        &lut,
+        &values,
+        &weights,
+        &mut gathered,
+        satmap_runtime::CameraMask::ALL,
+    )
+    .is_err()
+    {
         return 0;
     }
     let bus = can_bus(&EgoPose::new(DVec2::ZERO, 0.5), &EgoMotion::default());

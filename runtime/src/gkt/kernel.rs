@@ -1,6 +1,10 @@
 //! The native GKT gather-sum: `gathered[q] = (sum over participating cameras c, heads k, kernel
 //! points p of w[q,k,p] * value[c][index[c,q,k,p], head k channels]) / max(1, count[q])`.
 //!
+//! Camera dropout: only cameras in the step's [`CameraMask`] take part; `count[q]` is then the
+//! number of cameras that see `q` *and* are in the mask (the reference's `mask_cameras`), and a
+//! left-out camera's value features are never read.
+//!
 //! Determinism: every output element sees exactly the sequence of f32 operations of the
 //! contract (`acc = 0`; for c ascending, k, p ascending: `acc += w * v` as a multiply then an
 //! add; finally one division), so the result is bit-identical to the numpy reference whatever
@@ -15,6 +19,7 @@ use core::fmt;
 use super::lut::Lut;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::NUM_HEADS;
+use crate::frame::CameraMask;
 
 /// A buffer handed to [`gather_sum`] does not have the length the look-up table implies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -62,7 +67,8 @@ impl core::error::Error for KernelError {}
 /// Run the gather-sum.
 ///
 /// `values`: the six cameras' value features, `[6, F, D]` contiguous. `weights`: `[Q, 4, kp]`.
-/// `out`: `[Q, D]`, overwritten.
+/// `out`: `[Q, D]`, overwritten. `cameras`: the cameras that take part ([`CameraMask::ALL`]
+/// normally); the value features of the others are not read.
 ///
 /// # Errors
 /// A [`KernelError`] when a buffer length does not match the table's dimensions (nothing is
@@ -72,6 +78,7 @@ pub fn gather_sum(
     values: &[f32],
     weights: &[f32],
     out: &mut [f32],
+    cameras: CameraMask,
 ) -> Result<(), KernelError> {
     let dims = lut.dims();
     let value_len = dims.value_len();
@@ -95,35 +102,67 @@ pub fn gather_sum(
     }
     // Monomorphised head widths keep the accumulator in registers; others take the generic path.
     match dims.head_dims() {
-        8 => run::<8>(lut, values, weights, out),
-        16 => run::<16>(lut, values, weights, out),
-        32 => run::<32>(lut, values, weights, out),
-        64 => run::<64>(lut, values, weights, out),
-        _ => run_any(lut, values, weights, out),
+        8 => run::<8>(lut, values, weights, out, cameras),
+        16 => run::<16>(lut, values, weights, out, cameras),
+        32 => run::<32>(lut, values, weights, out, cameras),
+        64 => run::<64>(lut, values, weights, out, cameras),
+        _ => run_any(lut, values, weights, out, cameras),
     }
-    finish(lut, out);
+    finish(lut, out, cameras);
     Ok(())
 }
 
 /// Divide every row by its camera count (a division, as the contract says, not a reciprocal).
-fn finish(lut: &Lut, out: &mut [f32]) {
+fn finish(lut: &Lut, out: &mut [f32], cameras: CameraMask) {
     let d = lut.dims().embed_dims;
-    for (row, &n) in out.chunks_exact_mut(d).zip(lut.count()) {
-        let n = f32::from(n.max(1));
-        for v in row {
-            *v /= n;
+    if cameras == CameraMask::ALL {
+        for (row, &n) in out.chunks_exact_mut(d).zip(lut.count()) {
+            divide(row, n);
         }
+        return;
+    }
+    // Each camera's query ids ascend, so one cursor per camera counts the cameras of the mask
+    // that see q, without a count buffer.
+    let mut cursor = [0usize; NUM_CAMERAS];
+    for (q, row) in out.chunks_exact_mut(d).enumerate() {
+        let mut n = 0u8;
+        for (c, at) in cursor.iter_mut().enumerate() {
+            if !cameras.contains(c) {
+                continue;
+            }
+            if lut.camera_entries(c).0.get(*at).map(|&id| usize::from(id)) == Some(q) {
+                n += 1;
+                *at += 1;
+            }
+        }
+        divide(row, n);
+    }
+}
+
+fn divide(row: &mut [f32], n: u8) {
+    let n = f32::from(n.max(1));
+    for v in row {
+        *v /= n;
     }
 }
 
 #[inline(always)]
-fn run_const<const HD: usize>(lut: &Lut, values: &[f32], weights: &[f32], out: &mut [f32]) {
+fn run_const<const HD: usize>(
+    lut: &Lut,
+    values: &[f32],
+    weights: &[f32],
+    out: &mut [f32],
+    cameras: CameraMask,
+) {
     let dims = lut.dims();
     let d = dims.embed_dims;
     let kp = dims.kernel_points();
     let n = lut.entry_len();
     out.fill(0.0);
     for (c, value) in values.chunks_exact(dims.value_len()).enumerate() {
+        if !cameras.contains(c) {
+            continue;
+        }
         let (queries, indices) = lut.camera_entries(c);
         for (&q, idx) in queries.iter().zip(indices.chunks_exact(n)) {
             let q = usize::from(q);
@@ -151,27 +190,39 @@ fn run_const<const HD: usize>(lut: &Lut, values: &[f32], weights: &[f32], out: &
     }
 }
 
-fn run<const HD: usize>(lut: &Lut, values: &[f32], weights: &[f32], out: &mut [f32]) {
+fn run<const HD: usize>(
+    lut: &Lut,
+    values: &[f32],
+    weights: &[f32],
+    out: &mut [f32],
+    cameras: CameraMask,
+) {
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
     {
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { run_avx2::<HD>(lut, values, weights, out) };
+            unsafe { run_avx2::<HD>(lut, values, weights, out, cameras) };
             return;
         }
     }
-    run_const::<HD>(lut, values, weights, out);
+    run_const::<HD>(lut, values, weights, out, cameras);
 }
 
 /// The same loop compiled for AVX2 (wider vectors only: the `fma` feature is not enabled, and
 /// Rust never fuses a separate multiply and add, so the bits are those of the portable path).
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 #[target_feature(enable = "avx2")]
-fn run_avx2<const HD: usize>(lut: &Lut, values: &[f32], weights: &[f32], out: &mut [f32]) {
-    run_const::<HD>(lut, values, weights, out);
+fn run_avx2<const HD: usize>(
+    lut: &Lut,
+    values: &[f32],
+    weights: &[f32],
+    out: &mut [f32],
+    cameras: CameraMask,
+) {
+    run_const::<HD>(lut, values, weights, out, cameras);
 }
 
-fn run_any(lut: &Lut, values: &[f32], weights: &[f32], out: &mut [f32]) {
+fn run_any(lut: &Lut, values: &[f32], weights: &[f32], out: &mut [f32], cameras: CameraMask) {
     let dims = lut.dims();
     let (d, hd, kp, n) = (
         dims.embed_dims,
@@ -181,6 +232,9 @@ fn run_any(lut: &Lut, values: &[f32], weights: &[f32], out: &mut [f32]) {
     );
     out.fill(0.0);
     for (c, value) in values.chunks_exact(dims.value_len()).enumerate() {
+        if !cameras.contains(c) {
+            continue;
+        }
         let (queries, indices) = lut.camera_entries(c);
         for (&q, idx) in queries.iter().zip(indices.chunks_exact(n)) {
             let q = usize::from(q);
@@ -209,7 +263,7 @@ mod tests {
     use crate::model_dims::ModelDims;
 
     /// The contract, written as plainly as possible over the dense table: query-major.
-    fn naive(lut: &Lut, values: &[f32], weights: &[f32]) -> Vec<f32> {
+    fn naive(lut: &Lut, values: &[f32], weights: &[f32], cameras: CameraMask) -> Vec<f32> {
         let dims = lut.dims();
         let (q_n, d, hd, kp, f_n) = (
             dims.num_queries(),
@@ -223,7 +277,7 @@ mod tests {
         for q in 0..q_n {
             let mut acc = vec![0.0f32; d];
             for c in 0..6 {
-                if dense.mask[c * q_n + q] == 0 {
+                if dense.mask[c * q_n + q] == 0 || !cameras.contains(c) {
                     continue;
                 }
                 for k in 0..4 {
@@ -237,7 +291,10 @@ mod tests {
                     }
                 }
             }
-            let n = dense.count[q].max(1) as f32;
+            let seen = (0..6)
+                .filter(|&c| cameras.contains(c) && dense.mask[c * q_n + q] != 0)
+                .count();
+            let n = seen.max(1) as f32;
             for ch in 0..d {
                 out[q * d + ch] = acc[ch] / n;
             }
@@ -263,8 +320,8 @@ mod tests {
         let values = noise(6 * dims.value_len(), 7);
         let weights = noise(dims.weights_len(), 11);
         let mut out = vec![f32::NAN; dims.bev_len()];
-        gather_sum(&lut, &values, &weights, &mut out).unwrap();
-        let expected = naive(&lut, &values, &weights);
+        gather_sum(&lut, &values, &weights, &mut out, CameraMask::ALL).unwrap();
+        let expected = naive(&lut, &values, &weights, CameraMask::ALL);
         let same = out
             .iter()
             .zip(&expected)
@@ -272,12 +329,56 @@ mod tests {
         assert!(same, "kernel differs from the naive contract");
         // And the portable path agrees with the dispatched one.
         let mut portable = vec![0.0f32; dims.bev_len()];
-        run_any(&lut, &values, &weights, &mut portable);
-        finish(&lut, &mut portable);
+        run_any(&lut, &values, &weights, &mut portable, CameraMask::ALL);
+        finish(&lut, &mut portable, CameraMask::ALL);
         assert!(
             portable
                 .iter()
                 .zip(&out)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
+    }
+
+    #[test]
+    fn dropped_cameras_are_left_out_bit_identically() {
+        let dims = ModelDims::test_config();
+        let lut = Lut::new(&dims, &crate::test_support::nuscenes_like()).unwrap();
+        let weights = noise(dims.weights_len(), 11);
+        let mut full = vec![0.0f32; dims.bev_len()];
+        let values = noise(6 * dims.value_len(), 7);
+        gather_sum(&lut, &values, &weights, &mut full, CameraMask::ALL).unwrap();
+        for c in 0..6 {
+            let cameras = CameraMask::ALL.without(c);
+            // The dropped camera's features are never read: NaN there changes nothing.
+            let mut values = values.clone();
+            values[c * dims.value_len()..][..dims.value_len()].fill(f32::NAN);
+            let mut out = vec![0.0f32; dims.bev_len()];
+            gather_sum(&lut, &values, &weights, &mut out, cameras).unwrap();
+            let expected = naive(&lut, &values, &weights, cameras);
+            assert!(
+                out.iter()
+                    .zip(&expected)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "camera {c} dropped: kernel differs from the naive contract"
+            );
+            assert_ne!(out, full, "dropping camera {c} changed nothing");
+            let mut portable = vec![0.0f32; dims.bev_len()];
+            run_any(&lut, &values, &weights, &mut portable, cameras);
+            finish(&lut, &mut portable, cameras);
+            assert!(
+                portable
+                    .iter()
+                    .zip(&out)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
+        // Only the front camera: the monocular configuration.
+        let mut out = vec![0.0f32; dims.bev_len()];
+        gather_sum(&lut, &values, &weights, &mut out, CameraMask::only(0)).unwrap();
+        let expected = naive(&lut, &values, &weights, CameraMask::only(0));
+        assert!(
+            out.iter()
+                .zip(&expected)
                 .all(|(a, b)| a.to_bits() == b.to_bits())
         );
     }
@@ -309,7 +410,7 @@ mod tests {
         let values = noise(6 * dims.value_len(), 3);
         let weights = noise(dims.weights_len(), 5);
         let mut out = vec![1.0f32; dims.bev_len()];
-        gather_sum(&lut, &values, &weights, &mut out).unwrap();
+        gather_sum(&lut, &values, &weights, &mut out, CameraMask::ALL).unwrap();
         let d = dims.embed_dims;
         for (q, &n) in lut.count().iter().enumerate() {
             if n == 0 {
@@ -317,18 +418,18 @@ mod tests {
             }
         }
         assert_eq!(
-            gather_sum(&lut, &values[1..], &weights, &mut out),
+            gather_sum(&lut, &values[1..], &weights, &mut out, CameraMask::ALL),
             Err(KernelError::ValueLength {
                 expected: values.len(),
                 got: values.len() - 1
             })
         );
         assert!(matches!(
-            gather_sum(&lut, &values, &weights[1..], &mut out),
+            gather_sum(&lut, &values, &weights[1..], &mut out, CameraMask::ALL),
             Err(KernelError::WeightsLength { .. })
         ));
         assert!(matches!(
-            gather_sum(&lut, &values, &weights, &mut out[1..]),
+            gather_sum(&lut, &values, &weights, &mut out[1..], CameraMask::ALL),
             Err(KernelError::OutputLength { .. })
         ));
     }

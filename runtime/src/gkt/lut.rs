@@ -13,7 +13,7 @@ use alloc::vec::Vec;
 
 use glam::Mat4;
 
-use crate::buffers::zeroed;
+use crate::buffers::Slab;
 use crate::calibration::{Calibration, NUM_CAMERAS};
 use crate::capacity::NUM_HEADS;
 use crate::error::InitError;
@@ -23,18 +23,20 @@ use crate::model_dims::ModelDims;
 const MIN_DEPTH: f32 = 1e-5;
 
 /// Compact GKT look-up table over fixed-capacity storage.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Lut {
     dims: ModelDims,
     lidar2img: [Mat4; NUM_CAMERAS],
     /// `camera_start[c]..camera_start[c + 1]` are camera c's entries.
     camera_start: [usize; NUM_CAMERAS + 1],
-    /// Query id of each entry.
-    queries: Vec<u16>,
-    /// `entry_len` feature indices per entry.
-    indices: Vec<u16>,
+    /// Query id of each entry; the first `len` are in use (capacity: every camera, every query).
+    queries: Slab<u16>,
+    /// `entry_len` feature indices per entry, the first `len * entry_len` in use.
+    indices: Slab<u16>,
     /// Participating cameras per query.
-    count: Vec<u8>,
+    count: Slab<u8>,
+    /// Entries in use.
+    len: usize,
 }
 
 /// The dense look-up table of `ARCHITECTURE.md` (`lut.safetensors`), for comparison in tests.
@@ -86,18 +88,64 @@ impl Lut {
     /// [`InitError::InvalidCalibration`] for a bad camera, [`InitError::OutOfMemory`] when the
     /// storage cannot be reserved.
     pub fn new(dims: &ModelDims, calibration: &Calibration) -> Result<Self, InitError> {
-        let q = dims.num_queries();
-        let entry_len = NUM_HEADS * dims.kernel_points();
+        let (queries, indices, count) = Self::storage_lens(dims);
+        Self::with_storage(
+            dims,
+            calibration,
+            Slab::zeroed(queries)?,
+            Slab::zeroed(indices)?,
+            Slab::zeroed(count)?,
+        )
+    }
+
+    /// As [`Lut::new`], in the caller-placed `gkt_lut` region: `queries` and `indices` (u16)
+    /// and `count` (u8), each exactly [`Lut::storage_lens`] long.
+    pub(crate) fn placed(
+        dims: &ModelDims,
+        calibration: &Calibration,
+        queries: &'static mut [u16],
+        indices: &'static mut [u16],
+        count: &'static mut [u8],
+    ) -> Result<Self, InitError> {
+        Self::with_storage(
+            dims,
+            calibration,
+            Slab::placed(queries),
+            Slab::placed(indices),
+            Slab::placed(count),
+        )
+    }
+
+    fn with_storage(
+        dims: &ModelDims,
+        calibration: &Calibration,
+        queries: Slab<u16>,
+        indices: Slab<u16>,
+        count: Slab<u8>,
+    ) -> Result<Self, InitError> {
         let mut lut = Self {
             dims: dims.clone(),
             lidar2img: [Mat4::ZERO; NUM_CAMERAS],
             camera_start: [0; NUM_CAMERAS + 1],
-            queries: with_capacity(NUM_CAMERAS * q)?,
-            indices: with_capacity(NUM_CAMERAS * q * entry_len)?,
-            count: zeroed(q)?,
+            queries,
+            indices,
+            count,
+            len: 0,
         };
         lut.rebuild(calibration)?;
         Ok(lut)
+    }
+
+    /// Element counts of the table's three arrays for `dims`: query ids (u16), feature indices
+    /// (u16) and per-query camera counts (u8); [`Lut::capacity_bytes`] in all.
+    #[must_use]
+    pub const fn storage_lens(dims: &ModelDims) -> (usize, usize, usize) {
+        let q = dims.num_queries();
+        (
+            NUM_CAMERAS * q,
+            NUM_CAMERAS * q * NUM_HEADS * dims.kernel_points(),
+            q,
+        )
     }
 
     /// Bytes of storage the table reserves for `dims` (its fixed capacity).
@@ -121,11 +169,10 @@ impl Lut {
         let (pad_w, pad_h) = (d.pad_w as f32, d.pad_h as f32);
         let (feat_w, feat_h) = (d.feat_w as f32, d.feat_h as f32);
         let [xmin, ymin, _, xmax, ymax, _] = d.pc_range_m.map(f64::from);
-        self.queries.clear();
-        self.indices.clear();
         self.count.fill(0);
+        let mut len = 0;
         for (c, m) in self.lidar2img.iter().enumerate() {
-            self.camera_start[c] = self.queries.len();
+            self.camera_start[c] = len;
             for i in 0..d.bev_h {
                 let y = (ymin + ((i as f64 + 0.5) * (ymax - ymin)) / d.bev_h as f64) as f32;
                 for j in 0..d.bev_w {
@@ -135,10 +182,10 @@ impl Lut {
                         continue;
                     }
                     let q = i * d.bev_w + j;
-                    // Capacity is the worst case (every camera, every query): these never grow.
-                    debug_assert!(self.queries.len() < self.queries.capacity());
-                    self.queries.push(q as u16);
+                    // Capacity is the worst case (every camera, every query): `len` stays in it.
+                    self.queries[len] = q as u16;
                     self.count[q] += 1;
+                    let mut at = len * entry_len;
                     for &(_, u, v) in &proj {
                         let (su, sv) = (u * feat_w, v * feat_h);
                         for p in 0..d.kernel_points() {
@@ -147,14 +194,16 @@ impl Lut {
                             let dy = iy as f32 - (d.kernel_h / 2) as f32;
                             let col = cell(su + dx, d.feat_w);
                             let row = cell(sv + dy, d.feat_h);
-                            self.indices.push(row * d.feat_w as u16 + col);
+                            self.indices[at] = row * d.feat_w as u16 + col;
+                            at += 1;
                         }
                     }
+                    len += 1;
                 }
             }
         }
-        self.camera_start[NUM_CAMERAS] = self.queries.len();
-        debug_assert_eq!(self.indices.len(), self.queries.len() * entry_len);
+        self.camera_start[NUM_CAMERAS] = len;
+        self.len = len;
         Ok(())
     }
 
@@ -197,13 +246,13 @@ impl Lut {
     /// Total (camera, query) pairs in the table.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.queries.len()
+        self.len
     }
 
     /// True when no camera sees any query.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.queries.is_empty()
+        self.len == 0
     }
 
     /// Expand to the dense form of `ARCHITECTURE.md` (allocates; for tests and tools).
@@ -237,15 +286,6 @@ impl Lut {
             lidar2img,
         }
     }
-}
-
-fn with_capacity<T>(len: usize) -> Result<Vec<T>, InitError> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(len)
-        .map_err(|_| InitError::OutOfMemory {
-            bytes: len * core::mem::size_of::<T>(),
-        })?;
-    Ok(v)
 }
 
 #[cfg(test)]

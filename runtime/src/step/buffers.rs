@@ -6,9 +6,7 @@
 //!
 //! [`SatMap::buffers`]: super::SatMap::buffers
 
-use alloc::vec::Vec;
-
-use crate::buffers::zeroed;
+use crate::buffers::Slab;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::CAN_BUS_LEN;
 use crate::error::InitError;
@@ -16,27 +14,27 @@ use crate::model_dims::ModelDims;
 
 /// The pipeline's intermediate tensors of the last attempted step, row-major, sized from the
 /// model dimensions at init.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct StepBuffers {
     pub(super) can_bus: [f32; CAN_BUS_LEN],
     /// `[6, F, D]`.
-    pub(super) value: Vec<f32>,
+    pub(super) value: Slab<f32>,
     /// `[Q, D]`.
-    pub(super) query: Vec<f32>,
+    pub(super) query: Slab<f32>,
     /// `[Q, 4, kp]`.
-    pub(super) weights: Vec<f32>,
+    pub(super) weights: Slab<f32>,
     /// `[Q, D]`.
-    pub(super) gathered: Vec<f32>,
+    pub(super) gathered: Slab<f32>,
     /// `[bev_h, bev_w, D]`.
-    pub(super) camera_bev: Vec<f32>,
+    pub(super) camera_bev: Slab<f32>,
     /// `[sat_h, sat_w, 3]`.
-    pub(super) crop: Vec<u8>,
+    pub(super) crop: Slab<u8>,
     /// `[bev_h, bev_w, D]`.
-    pub(super) satellite_bev: Vec<f32>,
+    pub(super) satellite_bev: Slab<f32>,
     /// `[num_vec, 3]`.
-    pub(super) logits: Vec<f32>,
+    pub(super) logits: Slab<f32>,
     /// `[num_vec, num_pts, 2]`.
-    pub(super) points: Vec<f32>,
+    pub(super) points: Slab<f32>,
 }
 
 impl StepBuffers {
@@ -44,16 +42,32 @@ impl StepBuffers {
     pub(super) fn new(dims: &ModelDims) -> Result<Self, InitError> {
         Ok(Self {
             can_bus: [0.0; CAN_BUS_LEN],
-            value: zeroed(NUM_CAMERAS * dims.value_len())?,
-            query: zeroed(dims.bev_len())?,
-            weights: zeroed(dims.weights_len())?,
-            gathered: zeroed(dims.bev_len())?,
-            camera_bev: zeroed(dims.bev_len())?,
-            crop: zeroed(dims.crop_bytes())?,
-            satellite_bev: zeroed(dims.bev_len())?,
-            logits: zeroed(dims.logits_len())?,
-            points: zeroed(dims.points_len())?,
+            value: Slab::zeroed(NUM_CAMERAS * dims.value_len())?,
+            query: Slab::zeroed(dims.bev_len())?,
+            weights: Slab::zeroed(dims.weights_len())?,
+            gathered: Slab::zeroed(dims.bev_len())?,
+            camera_bev: Slab::zeroed(dims.bev_len())?,
+            crop: Slab::zeroed(dims.crop_bytes())?,
+            satellite_bev: Slab::zeroed(dims.bev_len())?,
+            logits: Slab::zeroed(dims.logits_len())?,
+            points: Slab::zeroed(dims.points_len())?,
         })
+    }
+
+    /// The same buffers in caller-placed regions (cut to the model's lengths and zeroed).
+    pub(super) fn placed(p: crate::placement::StepRegions) -> Self {
+        Self {
+            can_bus: [0.0; CAN_BUS_LEN],
+            value: Slab::placed(p.value_features),
+            query: Slab::placed(p.bev_query),
+            weights: Slab::placed(p.gkt_weights),
+            gathered: Slab::placed(p.gathered),
+            camera_bev: Slab::placed(p.camera_bev),
+            crop: Slab::placed(p.satellite_crop),
+            satellite_bev: Slab::placed(p.satellite_bev),
+            logits: Slab::placed(p.class_logits),
+            points: Slab::placed(p.points),
+        }
     }
 
     /// CAN-bus vector of the last attempted step.

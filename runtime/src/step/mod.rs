@@ -2,21 +2,24 @@
 //! once at init), checks each frame, drives the engine's stages and the native GKT kernel, and
 //! publishes the decoded [`MapFrame`].
 //!
-//! Step order: frame checks -> CAN-bus vector -> `bev_query` -> six `image_encoder` runs ->
-//! gather-sum -> `bev_encoder` -> satellite crop (source) -> `satellite_encoder`, or zeros when
+//! Step order: frame checks -> CAN-bus vector -> `bev_query` -> one `image_encoder` run per
+//! camera that takes part (see [`crate::frame::CameraState`]) -> gather-sum over those cameras -> `bev_encoder` -> satellite crop (source) -> `satellite_encoder`, or zeros when
 //! the prior is missing or corrupt (degraded) -> `map_decoder` -> finiteness check (normalised
 //! points also within [`MAX_NORMALISED_POINT`]) -> decode ->
 //! digest. Failure at any point returns a [`StepError`] and leaves the last published map, the
 //! last sequence and timestamp untouched; intermediate buffers then hold the partial step.
-//! `step` allocates nothing.
+//! `step` allocates nothing. The same step can be run slice by slice (`step/staged.rs`).
 //!
 //! The frame checks bound how far sequence and timestamp may jump ([`FrameLimits`]), so a frame
 //! cannot lock the runtime out: one that jumps too far is refused and not adopted.
 //! [`SatMap::reset`] is the explicit restart after which any first frame is accepted again.
 
 mod buffers;
+mod staged;
 
 pub use buffers::StepBuffers;
+use staged::Pending;
+pub use staged::{SliceDone, StepSlice};
 
 use crate::calibration::Calibration;
 use crate::can_bus::can_bus;
@@ -28,6 +31,7 @@ use crate::frame::{Frame, FrameLimits, LastStep, check_frame};
 use crate::gkt::{Lut, gather_sum};
 use crate::map_frame::{self, Health, MapFrame, SatellitePrior};
 use crate::model_dims::ModelDims;
+use crate::placement::RuntimeRegions;
 use crate::satellite::{Coverage, SatelliteSource};
 
 /// Largest magnitude of a normalised decoder point the step publishes (the model's points are
@@ -45,6 +49,8 @@ pub struct SatMap<E: Engine, S: SatelliteSource> {
     output: MapFrame,
     /// `None` until the first successful step, and again after [`SatMap::reset`].
     last: Option<LastStep>,
+    /// The staged step in progress.
+    pending: Option<Pending>,
 }
 
 impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
@@ -74,93 +80,261 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         dims.validate()?;
         crate::regions::check_regions(&dims)?;
         let lut = Lut::new(&dims, calibration)?;
-        Ok(Self {
-            buffers: StepBuffers::new(&dims)?,
+        let buffers = StepBuffers::new(&dims)?;
+        Ok(Self::assemble(
+            engine, satellite, dims, lut, buffers, limits,
+        ))
+    }
+
+    /// As [`SatMap::with_limits`], with every model-sized buffer in memory the caller placed
+    /// ([`RuntimeRegions`]: one region per runtime region of `memory_layout.toml`, each at least
+    /// its layout size and [`REGION_ALIGN`](crate::placement::REGION_ALIGN)-aligned). Nothing
+    /// of the step's own state is allocated (the engine keeps its own memory).
+    ///
+    /// # Errors
+    /// [`InitError::RegionTooSmall`] or [`InitError::RegionMisaligned`] naming the region,
+    /// else as [`SatMap::with_limits`].
+    pub fn in_regions(
+        engine: E,
+        calibration: &Calibration,
+        satellite: S,
+        limits: FrameLimits,
+        regions: RuntimeRegions,
+    ) -> Result<Self, InitError> {
+        limits.validate()?;
+        let dims = engine.dims().clone();
+        dims.validate()?;
+        crate::regions::check_regions(&dims)?;
+        let (step, lut) = regions.split(&dims)?;
+        let lut = Lut::placed(&dims, calibration, lut.queries, lut.indices, lut.count)?;
+        let buffers = StepBuffers::placed(step);
+        Ok(Self::assemble(
+            engine, satellite, dims, lut, buffers, limits,
+        ))
+    }
+
+    fn assemble(
+        engine: E,
+        satellite: S,
+        dims: ModelDims,
+        lut: Lut,
+        buffers: StepBuffers,
+        limits: FrameLimits,
+    ) -> Self {
+        Self {
+            buffers,
             limits,
             output: MapFrame::default(),
             last: None,
+            pending: None,
             engine,
             satellite,
             dims,
             lut,
-        })
+        }
     }
 
-    /// Run one step on `frame` and return the new map.
+    /// Run one step on `frame` and return the new map: [`SatMap::step_begin`], every
+    /// [`SatMap::step_run_next`], then [`SatMap::step_finish`].
     ///
     /// # Errors
     /// An input check, an engine stage or a non-finite decoder output; see [`StepError`].
     /// The runtime stays usable: the next good frame steps normally.
+    /// [`StepError::StepInProgress`] while a staged step is in progress.
     pub fn step(&mut self, frame: &Frame<'_>) -> Result<&MapFrame, StepError> {
-        check_frame(frame, &self.dims, &self.limits, self.last)?;
-        let b = &mut self.buffers;
-        b.can_bus = can_bus(&frame.pose, &frame.motion);
-        self.engine
-            .bev_query(&b.can_bus, &mut b.query, &mut b.weights)?;
-        let value_len = self.dims.value_len();
-        for (camera, (image, value)) in frame
-            .images
-            .iter()
-            .zip(b.value.chunks_exact_mut(value_len))
-            .enumerate()
-        {
-            // check_frame guarantees every image is present.
-            let Some(image) = image else {
-                return Err(StepError::MissingCamera { camera });
-            };
-            self.engine.encode_image(camera, image.rgb, value)?;
-        }
-        gather_sum(&self.lut, &b.value, &b.weights, &mut b.gathered)?;
-        self.engine
-            .bev_encode(&b.query, &b.gathered, &mut b.camera_bev)?;
+        self.step_begin(frame)?;
+        while self.step_run_next(frame)?.more() {}
+        self.step_finish()
+    }
 
-        let spec = self.dims.crop_spec();
-        let coverage = self.satellite.crop(&frame.pose, &spec, &mut b.crop);
-        let (prior, degraded) = match coverage {
-            Coverage::Full => (SatellitePrior::Present, false),
-            Coverage::Partial { covered_permille } => {
-                (SatellitePrior::Partial { covered_permille }, false)
-            }
-            Coverage::None => (SatellitePrior::Missing, true),
-            Coverage::Corrupt => (SatellitePrior::Corrupt, true),
-        };
-        if degraded {
-            b.satellite_bev.fill(0.0);
-        } else {
-            self.engine
-                .encode_satellite(&b.crop, &mut b.satellite_bev)?;
-        }
-        self.engine.decode_map(
-            &b.camera_bev,
-            &b.satellite_bev,
-            &mut b.logits,
-            &mut b.points,
-        )?;
-        // Points are normalised to the BEV range (sigmoid outputs in [0, 1]); a finite but huge
-        // value would still decode to an infinite coordinate in metres, so bound them too.
-        if !(b.logits.iter().all(|v| v.is_finite())
-            && b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT))
-        {
-            return Err(StepError::NonFiniteOutput {
-                stage: Stage::MapDecoder,
+    /// Start a staged step: check `frame` (as [`SatMap::step`] does) and run nothing yet.
+    ///
+    /// # Errors
+    /// [`StepError::StepInProgress`] while another staged step is in progress (that step
+    /// continues); else the frame checks' errors (no step is started then).
+    pub fn step_begin(&mut self, frame: &Frame<'_>) -> Result<(), StepError> {
+        if let Some(p) = &self.pending {
+            return Err(StepError::StepInProgress {
+                sequence: p.sequence,
             });
         }
-
-        // Every stage succeeded: publish.
-        decode(&self.dims, &b.logits, &b.points, &mut self.output.elements);
-        self.output.sequence = frame.sequence;
-        self.output.timestamp_us = frame.timestamp_us;
-        self.output.health = Health {
-            satellite: prior,
-            degraded,
-            deadline_overrun: false,
-        };
-        self.output.digest = map_frame::digest(&self.output.elements);
-        self.last = Some(LastStep {
+        let cameras = check_frame(frame, &self.dims, &self.limits, self.last)?;
+        self.pending = Some(Pending {
             sequence: frame.sequence,
             timestamp_us: frame.timestamp_us,
+            pose: frame.pose,
+            cameras,
+            slot: 0,
+            prior: SatellitePrior::Missing,
+            degraded: true,
+        });
+        Ok(())
+    }
+
+    /// Run the next slice of the staged step. `frame` must be the frame given to
+    /// [`SatMap::step_begin`] (same sequence and timestamp, images still valid).
+    ///
+    /// # Errors
+    /// [`StepError::NoStepInProgress`], [`StepError::FrameMismatch`] (the staged step goes
+    /// on), or the slice's own error, which ends the staged step.
+    pub fn step_run_next(&mut self, frame: &Frame<'_>) -> Result<SliceDone, StepError> {
+        let Some(mut p) = self.pending else {
+            return Err(StepError::NoStepInProgress);
+        };
+        if (frame.sequence, frame.timestamp_us) != (p.sequence, p.timestamp_us) {
+            return Err(StepError::FrameMismatch {
+                expected_sequence: p.sequence,
+                got_sequence: frame.sequence,
+            });
+        }
+        let Some((slot, slice)) = p.next() else {
+            // Every slice ran; only step_finish is left.
+            return Ok(SliceDone {
+                slice: StepSlice::MapDecoder,
+                remaining: 0,
+            });
+        };
+        match self.run_slice(slice, frame, &mut p) {
+            Ok(()) => {
+                p.slot = slot + 1;
+                self.pending = Some(p);
+                Ok(SliceDone {
+                    slice,
+                    remaining: p.remaining_after(slot),
+                })
+            }
+            Err(e) => {
+                self.pending = None;
+                Err(e)
+            }
+        }
+    }
+
+    /// Publish the staged step's map: decode, health and digest.
+    ///
+    /// # Errors
+    /// [`StepError::NoStepInProgress`], or [`StepError::StepIncomplete`] while slices remain
+    /// (the staged step goes on).
+    pub fn step_finish(&mut self) -> Result<&MapFrame, StepError> {
+        let Some(p) = self.pending else {
+            return Err(StepError::NoStepInProgress);
+        };
+        if let Some((_, next)) = p.next() {
+            return Err(StepError::StepIncomplete { next });
+        }
+        self.pending = None;
+        let b = &self.buffers;
+        decode(&self.dims, &b.logits, &b.points, &mut self.output.elements);
+        self.output.sequence = p.sequence;
+        self.output.timestamp_us = p.timestamp_us;
+        self.output.health = Health {
+            satellite: p.prior,
+            degraded: p.degraded,
+            deadline_overrun: false,
+            cameras: p.cameras.states,
+        };
+        self.output.digest = map_frame::digest(&self.output.elements);
+        self.output.e2e_counter = self.output.e2e_counter.wrapping_add(1);
+        self.last = Some(LastStep {
+            sequence: p.sequence,
+            timestamp_us: p.timestamp_us,
         });
         Ok(&self.output)
+    }
+
+    /// Drop the staged step in progress, if any (the published map is untouched). For a
+    /// scheduler that gives up on a frame, e.g. at its deadline.
+    pub fn step_abort(&mut self) {
+        self.pending = None;
+    }
+
+    /// The next slice of the staged step in progress; `None` when no step is in progress or
+    /// only [`SatMap::step_finish`] is left.
+    #[must_use]
+    pub fn next_slice(&self) -> Option<StepSlice> {
+        self.pending.and_then(|p| p.next()).map(|(_, s)| s)
+    }
+
+    fn run_slice(
+        &mut self,
+        slice: StepSlice,
+        frame: &Frame<'_>,
+        p: &mut Pending,
+    ) -> Result<(), StepError> {
+        let b = &mut self.buffers;
+        match slice {
+            StepSlice::BevQuery => {
+                b.can_bus = can_bus(&frame.pose, &frame.motion);
+                self.engine
+                    .bev_query(&b.can_bus, &mut b.query, &mut b.weights)?;
+            }
+            StepSlice::ImageEncoder { camera } => {
+                let camera = usize::from(camera);
+                let value_len = self.dims.value_len();
+                // step_begin checked this image; only a different frame can lack it here.
+                let (Some(image), Some(value)) = (
+                    frame.images.get(camera).copied().flatten(),
+                    b.value.chunks_exact_mut(value_len).nth(camera),
+                ) else {
+                    return Err(StepError::FrameMismatch {
+                        expected_sequence: p.sequence,
+                        got_sequence: frame.sequence,
+                    });
+                };
+                self.engine.encode_image(camera, image.rgb, value)?;
+            }
+            StepSlice::GktGather => {
+                gather_sum(
+                    &self.lut,
+                    &b.value,
+                    &b.weights,
+                    &mut b.gathered,
+                    p.cameras.mask,
+                )?;
+            }
+            StepSlice::BevEncoder => {
+                self.engine
+                    .bev_encode(&b.query, &b.gathered, &mut b.camera_bev)?;
+            }
+            StepSlice::Satellite => {
+                let spec = self.dims.crop_spec();
+                let coverage = self.satellite.crop(&p.pose, &spec, &mut b.crop);
+                let (prior, degraded) = match coverage {
+                    Coverage::Full => (SatellitePrior::Present, false),
+                    Coverage::Partial { covered_permille } => {
+                        (SatellitePrior::Partial { covered_permille }, false)
+                    }
+                    Coverage::None => (SatellitePrior::Missing, true),
+                    Coverage::Corrupt => (SatellitePrior::Corrupt, true),
+                };
+                if degraded {
+                    b.satellite_bev.fill(0.0);
+                } else {
+                    self.engine
+                        .encode_satellite(&b.crop, &mut b.satellite_bev)?;
+                }
+                (p.prior, p.degraded) = (prior, degraded);
+            }
+            StepSlice::MapDecoder => {
+                self.engine.decode_map(
+                    &b.camera_bev,
+                    &b.satellite_bev,
+                    &mut b.logits,
+                    &mut b.points,
+                )?;
+                // Points are normalised to the BEV range (sigmoid outputs in [0, 1]); a finite
+                // but huge value would still decode to an infinite coordinate in metres, so
+                // bound them too.
+                if !(b.logits.iter().all(|v| v.is_finite())
+                    && b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT))
+                {
+                    return Err(StepError::NonFiniteOutput {
+                        stage: Stage::MapDecoder,
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Rebuild the GKT look-up table for a new calibration; the model stays loaded and nothing
@@ -186,6 +360,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// allocated.
     pub fn reset(&mut self) {
         self.last = None;
+        self.pending = None;
         self.satellite.reset();
     }
 

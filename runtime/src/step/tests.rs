@@ -39,7 +39,8 @@ fn good_step_runs_every_stage_and_publishes() {
         Health {
             satellite: SatellitePrior::Present,
             degraded: false,
-            deadline_overrun: false
+            deadline_overrun: false,
+            cameras: Default::default(),
         }
     );
     assert_eq!(out.digest, map_frame::digest(&out.elements));
@@ -62,7 +63,14 @@ fn good_step_runs_every_stage_and_publishes() {
     );
     // Intermediate buffers are consistent with each other.
     let mut gathered = alloc::vec![0.0f32; dims.bev_len()];
-    gather_sum(rt.lut(), rt.value(), rt.weights(), &mut gathered).unwrap();
+    gather_sum(
+        rt.lut(),
+        rt.value(),
+        rt.weights(),
+        &mut gathered,
+        crate::frame::CameraMask::ALL,
+    )
+    .unwrap();
     assert_eq!(gathered, rt.gathered());
     assert_eq!(rt.crop(), c.as_slice());
     assert_eq!(
@@ -141,9 +149,13 @@ fn each_bad_input_then_a_good_step() {
             |e| e == StepError::NonFiniteMotion,
         ),
         (
-            "missing camera",
-            |f| f.images[4] = None,
-            |e| e == StepError::MissingCamera { camera: 4 },
+            "no camera left",
+            |f| f.images = [None; 6],
+            |e| {
+                e == StepError::NoCameraLeft {
+                    states: [crate::frame::CameraState::Missing; 6],
+                }
+            },
         ),
         (
             "wrong size",
@@ -190,6 +202,8 @@ fn each_bad_input_then_a_good_step() {
                 width_px: 320,
                 height_px: 180,
                 rgb: &short,
+                capture_us: 0,
+                valid: true,
             });
         }
         let _ = &small;
@@ -393,7 +407,7 @@ fn step_does_not_allocate() {
     let mut rt = runtime(&c);
     let frames: Vec<Frame<'_>> = (1..=5).map(|s| images.frame(s)).collect();
     let mut bad = images.frame(3);
-    bad.images[0] = None;
+    bad.images = [None; 6];
     let (digests, allocations) = count_allocations(|| {
         let mut d = [0u64; 5];
         for (i, f) in frames.iter().enumerate() {
@@ -414,4 +428,25 @@ fn step_does_not_allocate() {
     let (res, allocations) = count_allocations(|| none.step(&frames[0]).map(|m| m.health));
     assert!(res.unwrap().degraded);
     assert_eq!(allocations, 0);
+}
+
+#[test]
+fn a_missing_camera_is_left_out_of_the_step_and_flagged() {
+    use crate::frame::CameraState;
+    let dims = ModelDims::test_config();
+    let c = crop(&dims);
+    let images = Images::new(&dims, 1);
+    let mut rt = runtime(&c);
+    let mut f = images.frame(1);
+    f.images[4] = None;
+    let out = rt.step(&f).unwrap().clone();
+    assert_eq!(out.health.cameras[4], CameraState::Missing);
+    assert_eq!(out.health.cameras_dropped(), 1 << 4);
+    let encoded = rt
+        .engine()
+        .calls
+        .iter()
+        .filter(|&&s| s == Stage::ImageEncoder)
+        .count();
+    assert_eq!(encoded, 5, "the missing camera's encoder must not run");
 }

@@ -1,13 +1,17 @@
 //! The step's output: a fixed-capacity list of map polylines in the ego frame, health flags and
-//! a digest for replay comparison.
+//! a digest for replay comparison; its protected serialised form is in [`wire`].
 //!
 //! Frame: points are ego metres, x right, y forward (the BEV range of the model).
+
+pub mod wire;
 
 use glam::Vec2;
 use heapless::Vec;
 use xxhash_rust::xxh3::Xxh3;
 
+use crate::calibration::NUM_CAMERAS;
 use crate::capacity::{MAX_TOP_K, NUM_POINTS};
+use crate::frame::CameraState;
 
 /// Map element class, in head order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -73,6 +77,21 @@ pub struct Health {
     pub degraded: bool,
     /// Set by the caller (via `SatMap::mark_deadline_overrun`) when the step missed its deadline.
     pub deadline_overrun: bool,
+    /// How each camera took part (model order): a camera not [`CameraState::Used`] was left
+    /// out of the view transform for this step.
+    pub cameras: [CameraState; NUM_CAMERAS],
+}
+
+impl Health {
+    /// Cameras left out of this step, bit `c` for camera `c`.
+    #[must_use]
+    pub fn cameras_dropped(&self) -> u8 {
+        self.cameras
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| **s != CameraState::Used)
+            .fold(0, |bits, (c, _)| bits | (1 << c))
+    }
 }
 
 /// The map of one step.
@@ -88,6 +107,9 @@ pub struct MapFrame {
     pub health: Health,
     /// [`digest`] of `elements`.
     pub digest: u64,
+    /// End-to-end counter of the published map: +1 for every published map, wrapping
+    /// (the `counter` of the serialised frame, [`wire`]).
+    pub e2e_counter: u16,
 }
 
 /// Bytes one element contributes to the digest.

@@ -1,0 +1,418 @@
+//! The map frame's protected serialised form, for crossing a bus or a process boundary: an
+//! AUTOSAR E2E Profile 4-style header (length, counter, data id, CRC-32/AUTOSAR) followed by the
+//! frame, little-endian, documented to the byte in `ARCHITECTURE.md` ("Protected map frame").
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 0..2 | `length`: u16, bytes of the whole serialised frame |
+//! | 2..4 | `counter`: u16, [`MapFrame::e2e_counter`] (+1 per published map, wraps) |
+//! | 4..8 | `data_id`: u32, the message id the receiver expects |
+//! | 8..12 | `crc`: u32, CRC-32/AUTOSAR (poly 0xF4ACFB13) over bytes 0..8 then 12..length |
+//! | 12..20 | `sequence`: u64 |
+//! | 20..28 | `timestamp_us`: u64 |
+//! | 28..36 | `digest`: u64 ([`super::digest`]) |
+//! | 36..40 | health word: u32 ([`health_word`]) |
+//! | 40..42 | `covered_permille`: u16 (0 unless the prior is partial) |
+//! | 42 | element count: u8 (at most `MAX_TOP_K`) |
+//! | 43 | reserved, 0 |
+//! | 44.. | elements, [`ELEMENT_BYTES`] each: class u8, reserved u8 (0), instance u16, score f32 bits, then 20 x (x f32 bits, y f32 bits), ego metres |
+//!
+//! Health word: bits `2c..2c+2` camera `c`'s [`CameraState`] (c = 0..6); bits 12..15 the
+//! satellite prior (0 present, 1 partial, 2 missing, 3 corrupt); bit 15 degraded; bit 16
+//! deadline overrun; the rest 0.
+
+use core::fmt;
+
+use crc::{CRC_32_AUTOSAR, Crc};
+use glam::Vec2;
+
+use super::{Health, MapClass, MapElement, MapFrame, SatellitePrior};
+use crate::calibration::NUM_CAMERAS;
+use crate::capacity::{MAX_TOP_K, NUM_POINTS};
+use crate::frame::CameraState;
+
+/// Header and frame fields before the elements, bytes.
+pub const HEADER_BYTES: usize = 44;
+/// One serialised element, bytes.
+pub const ELEMENT_BYTES: usize = 8 + NUM_POINTS * 8;
+/// The largest serialised frame (`MAX_TOP_K` elements), bytes: a buffer of this size always
+/// suffices.
+pub const MAX_WIRE_BYTES: usize = HEADER_BYTES + MAX_TOP_K * ELEMENT_BYTES;
+/// The data id SatMap's map message carries unless the integrator assigns another ("SMAP").
+pub const DEFAULT_DATA_ID: u32 = 0x534D_4150;
+
+const CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_AUTOSAR);
+
+/// Why a serialised frame was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum WireError {
+    /// The output buffer cannot hold the frame.
+    BufferTooSmall {
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes given.
+        got: usize,
+    },
+    /// Fewer bytes than a header, or not the length the header states.
+    Length {
+        /// Bytes the header states (0 when there is no header).
+        stated: usize,
+        /// Bytes received.
+        got: usize,
+    },
+    /// The CRC does not match: the frame was corrupted.
+    Crc {
+        /// CRC in the frame.
+        stated: u32,
+        /// CRC of the bytes received.
+        computed: u32,
+    },
+    /// Another message's data id.
+    DataId {
+        /// Data id expected.
+        expected: u32,
+        /// Data id received.
+        got: u32,
+    },
+    /// A field outside its range (element count, class, health bits): a sender bug, since the
+    /// CRC matched.
+    Field {
+        /// Byte offset of the field.
+        offset: usize,
+    },
+}
+
+impl fmt::Display for WireError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::BufferTooSmall { needed, got } => {
+                write!(f, "map frame needs {needed} bytes, buffer has {got}")
+            }
+            Self::Length { stated, got } => {
+                write!(f, "map frame states {stated} bytes, {got} received")
+            }
+            Self::Crc { stated, computed } => write!(
+                f,
+                "map frame CRC {stated:#010x} does not match the bytes ({computed:#010x})"
+            ),
+            Self::DataId { expected, got } => {
+                write!(
+                    f,
+                    "map frame data id {got:#010x}, expected {expected:#010x}"
+                )
+            }
+            Self::Field { offset } => write!(f, "map frame field at byte {offset} out of range"),
+        }
+    }
+}
+
+impl core::error::Error for WireError {}
+
+/// The health word of the serialised frame (layout in the module doc).
+#[must_use]
+pub fn health_word(h: &Health) -> u32 {
+    let cameras = h
+        .cameras
+        .iter()
+        .enumerate()
+        .fold(0u32, |w, (c, s)| w | (u32::from(*s as u8) << (2 * c)));
+    let prior = match h.satellite {
+        SatellitePrior::Present => 0u32,
+        SatellitePrior::Partial { .. } => 1,
+        SatellitePrior::Missing => 2,
+        SatellitePrior::Corrupt => 3,
+    };
+    cameras | prior << 12 | u32::from(h.degraded) << 15 | u32::from(h.deadline_overrun) << 16
+}
+
+fn health_from_word(word: u32, covered_permille: u16) -> Option<Health> {
+    if word >> 17 != 0 || (word >> 12) & 0b111 > 3 {
+        return None;
+    }
+    let camera = |c: usize| match (word >> (2 * c)) & 0b11 {
+        0 => CameraState::Used,
+        1 => CameraState::Missing,
+        2 => CameraState::Stale,
+        _ => CameraState::Invalid,
+    };
+    let satellite = match (word >> 12) & 0b111 {
+        0 => SatellitePrior::Present,
+        1 => SatellitePrior::Partial { covered_permille },
+        2 => SatellitePrior::Missing,
+        _ => SatellitePrior::Corrupt,
+    };
+    Some(Health {
+        satellite,
+        degraded: word & (1 << 15) != 0,
+        deadline_overrun: word & (1 << 16) != 0,
+        cameras: core::array::from_fn(camera),
+    })
+}
+
+/// Bytes `frame` serialises to.
+#[must_use]
+pub fn wire_len(frame: &MapFrame) -> usize {
+    HEADER_BYTES + frame.elements.len() * ELEMENT_BYTES
+}
+
+/// Serialise `frame` with its E2E header into the start of `out`; returns the bytes written.
+///
+/// # Errors
+/// [`WireError::BufferTooSmall`] (nothing written).
+pub fn serialise(frame: &MapFrame, data_id: u32, out: &mut [u8]) -> Result<usize, WireError> {
+    let len = wire_len(frame);
+    let Some(out) = out.get_mut(..len) else {
+        return Err(WireError::BufferTooSmall {
+            needed: len,
+            got: out.len(),
+        });
+    };
+    // len <= MAX_WIRE_BYTES < 65536.
+    out[0..2].copy_from_slice(&(len as u16).to_le_bytes());
+    out[2..4].copy_from_slice(&frame.e2e_counter.to_le_bytes());
+    out[4..8].copy_from_slice(&data_id.to_le_bytes());
+    out[12..20].copy_from_slice(&frame.sequence.to_le_bytes());
+    out[20..28].copy_from_slice(&frame.timestamp_us.to_le_bytes());
+    out[28..36].copy_from_slice(&frame.digest.to_le_bytes());
+    out[36..40].copy_from_slice(&health_word(&frame.health).to_le_bytes());
+    let covered = match frame.health.satellite {
+        SatellitePrior::Partial { covered_permille } => covered_permille,
+        _ => 0,
+    };
+    out[40..42].copy_from_slice(&covered.to_le_bytes());
+    out[42] = frame.elements.len() as u8;
+    out[43] = 0;
+    for (e, b) in frame
+        .elements
+        .iter()
+        .zip(out[HEADER_BYTES..].chunks_exact_mut(ELEMENT_BYTES))
+    {
+        b[0] = e.class as u8;
+        b[1] = 0;
+        b[2..4].copy_from_slice(&e.instance.to_le_bytes());
+        b[4..8].copy_from_slice(&e.score.to_bits().to_le_bytes());
+        for (p, pb) in e.points_m.iter().zip(b[8..].chunks_exact_mut(8)) {
+            pb[0..4].copy_from_slice(&p.x.to_bits().to_le_bytes());
+            pb[4..8].copy_from_slice(&p.y.to_bits().to_le_bytes());
+        }
+    }
+    let crc = crc_of(out);
+    out[8..12].copy_from_slice(&crc.to_le_bytes());
+    Ok(len)
+}
+
+/// CRC-32/AUTOSAR over bytes 0..8 and 12..end (everything but the CRC field).
+fn crc_of(frame: &[u8]) -> u32 {
+    let mut digest = CRC32.digest();
+    digest.update(&frame[..8]);
+    digest.update(&frame[12..]);
+    digest.finalize()
+}
+
+/// What a checked frame's header says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Checked {
+    /// The E2E counter.
+    pub counter: u16,
+    /// The frame's sequence counter.
+    pub sequence: u64,
+}
+
+/// Check a received serialised frame: length, CRC, then data id.
+///
+/// # Errors
+/// [`WireError::Length`], [`WireError::Crc`] or [`WireError::DataId`].
+pub fn check(bytes: &[u8], data_id: u32) -> Result<Checked, WireError> {
+    let stated = bytes
+        .get(0..2)
+        .map_or(0, |b| usize::from(u16::from_le_bytes([b[0], b[1]])));
+    if bytes.len() < HEADER_BYTES || stated != bytes.len() {
+        return Err(WireError::Length {
+            stated,
+            got: bytes.len(),
+        });
+    }
+    let stated_crc = u32::from_le_bytes(le4(&bytes[8..12]));
+    let computed = crc_of(bytes);
+    if stated_crc != computed {
+        return Err(WireError::Crc {
+            stated: stated_crc,
+            computed,
+        });
+    }
+    let got = u32::from_le_bytes(le4(&bytes[4..8]));
+    if got != data_id {
+        return Err(WireError::DataId {
+            expected: data_id,
+            got,
+        });
+    }
+    Ok(Checked {
+        counter: u16::from_le_bytes([bytes[2], bytes[3]]),
+        sequence: u64::from_le_bytes(le8(&bytes[12..20])),
+    })
+}
+
+/// [`check`], then parse the frame back.
+///
+/// # Errors
+/// As [`check`], and [`WireError::Field`] for an element count that disagrees with the length
+/// or a class / health value out of range.
+pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
+    let checked = check(bytes, data_id)?;
+    let n = usize::from(bytes[42]);
+    if n > MAX_TOP_K || bytes.len() != HEADER_BYTES + n * ELEMENT_BYTES {
+        return Err(WireError::Field { offset: 42 });
+    }
+    let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
+    let health = health_from_word(u32::from_le_bytes(le4(&bytes[36..40])), covered)
+        .ok_or(WireError::Field { offset: 36 })?;
+    let mut frame = MapFrame {
+        sequence: checked.sequence,
+        timestamp_us: u64::from_le_bytes(le8(&bytes[20..28])),
+        elements: heapless::Vec::new(),
+        health,
+        digest: u64::from_le_bytes(le8(&bytes[28..36])),
+        e2e_counter: checked.counter,
+    };
+    for (k, b) in bytes[HEADER_BYTES..]
+        .chunks_exact(ELEMENT_BYTES)
+        .enumerate()
+    {
+        let class = MapClass::from_label(usize::from(b[0])).ok_or(WireError::Field {
+            offset: HEADER_BYTES + k * ELEMENT_BYTES,
+        })?;
+        let mut points_m = [Vec2::ZERO; NUM_POINTS];
+        for (p, pb) in points_m.iter_mut().zip(b[8..].chunks_exact(8)) {
+            *p = Vec2::new(
+                f32::from_bits(u32::from_le_bytes(le4(&pb[0..4]))),
+                f32::from_bits(u32::from_le_bytes(le4(&pb[4..8]))),
+            );
+        }
+        let element = MapElement {
+            class,
+            score: f32::from_bits(u32::from_le_bytes(le4(&b[4..8]))),
+            instance: u16::from_le_bytes([b[2], b[3]]),
+            points_m,
+        };
+        // n <= MAX_TOP_K, checked above.
+        let _ = frame.elements.push(element);
+    }
+    Ok(frame)
+}
+
+fn le4(b: &[u8]) -> [u8; 4] {
+    let mut a = [0; 4];
+    a.copy_from_slice(&b[..4]);
+    a
+}
+
+fn le8(b: &[u8]) -> [u8; 8] {
+    let mut a = [0; 8];
+    a.copy_from_slice(&b[..8]);
+    a
+}
+
+const _: () = assert!(MAX_WIRE_BYTES <= u16::MAX as usize);
+const _: () = assert!(NUM_CAMERAS * 2 <= 12);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map_frame::digest;
+
+    pub(crate) fn sample() -> MapFrame {
+        let mut f = MapFrame {
+            sequence: 0x0102_0304_0506_0708,
+            timestamp_us: 42_000_000,
+            e2e_counter: 65535,
+            health: Health {
+                satellite: SatellitePrior::Partial {
+                    covered_permille: 731,
+                },
+                degraded: false,
+                deadline_overrun: true,
+                cameras: [
+                    CameraState::Used,
+                    CameraState::Missing,
+                    CameraState::Used,
+                    CameraState::Stale,
+                    CameraState::Invalid,
+                    CameraState::Used,
+                ],
+            },
+            ..MapFrame::default()
+        };
+        for k in 0..3u16 {
+            let _ = f.elements.push(MapElement {
+                class: MapClass::from_label(usize::from(k)).unwrap_or(MapClass::Divider),
+                score: 0.9 - f32::from(k) * 0.1,
+                instance: 7 * k,
+                points_m: core::array::from_fn(|i| Vec2::new(i as f32 * 0.5, -(k as f32))),
+            });
+        }
+        f.digest = digest(&f.elements);
+        f
+    }
+
+    #[test]
+    fn round_trip_and_documented_offsets() {
+        let f = sample();
+        let mut buf = [0u8; MAX_WIRE_BYTES];
+        let n = serialise(&f, DEFAULT_DATA_ID, &mut buf).unwrap();
+        assert_eq!(n, HEADER_BYTES + 3 * ELEMENT_BYTES);
+        let bytes = &buf[..n];
+        assert_eq!(u16::from_le_bytes([bytes[0], bytes[1]]) as usize, n);
+        assert_eq!(u16::from_le_bytes([bytes[2], bytes[3]]), 65535);
+        assert_eq!(&bytes[4..8], &DEFAULT_DATA_ID.to_le_bytes());
+        assert_eq!(&bytes[12..20], &f.sequence.to_le_bytes());
+        // Camera states 0,1,0,2,3,0 -> bits; partial prior (1 << 12); overrun (1 << 16).
+        let word = 1 << 2 | 2 << 6 | 3 << 8 | 1 << 12 | 1 << 16;
+        assert_eq!(&bytes[36..40], &(word as u32).to_le_bytes());
+        assert_eq!(&bytes[40..42], &731u16.to_le_bytes());
+        assert_eq!(bytes[42], 3);
+        // The CRC is CRC-32/AUTOSAR of everything but itself (check value of the catalogue).
+        assert_eq!(CRC32.checksum(b"123456789"), 0x1697_D06A);
+        assert_eq!(deserialise(bytes, DEFAULT_DATA_ID), Ok(f));
+        assert!(matches!(
+            deserialise(bytes, DEFAULT_DATA_ID + 1),
+            Err(WireError::DataId { .. })
+        ));
+        assert!(matches!(
+            serialise(&sample(), DEFAULT_DATA_ID, &mut buf[..n - 1]),
+            Err(WireError::BufferTooSmall { .. })
+        ));
+    }
+
+    #[test]
+    fn every_single_bit_flip_fails_the_check() {
+        let mut buf = [0u8; MAX_WIRE_BYTES];
+        let n = serialise(&sample(), DEFAULT_DATA_ID, &mut buf).unwrap();
+        let good = buf;
+        let mut flips = 0;
+        for bit in 0..n * 8 {
+            let mut bad = good;
+            bad[bit / 8] ^= 1 << (bit % 8);
+            assert!(
+                check(&bad[..n], DEFAULT_DATA_ID).is_err(),
+                "flip of bit {bit} passed the check"
+            );
+            flips += 1;
+        }
+        assert_eq!(flips, n * 8);
+        // Truncated and extended frames fail on the length.
+        assert!(matches!(
+            check(&good[..n - 1], DEFAULT_DATA_ID),
+            Err(WireError::Length { .. })
+        ));
+        assert!(matches!(
+            check(&good[..n + 1], DEFAULT_DATA_ID),
+            Err(WireError::Length { .. })
+        ));
+        assert!(matches!(
+            check(&[], DEFAULT_DATA_ID),
+            Err(WireError::Length { .. })
+        ));
+    }
+}
