@@ -1,0 +1,491 @@
+//! The runtime handle and the C functions over it.
+//!
+//! Every function body runs inside `catch_unwind`: nothing unwinds into C. Pointers are checked
+//! for NULL; their validity, lengths and lifetimes are the caller's side of the contract in
+//! `satmap.h`.
+
+use core::ffi::{CStr, c_char};
+use std::fmt::Write as _;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::Path;
+
+use satmap_runtime::calibration::from_toml_file;
+use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::frame::FrameLimits;
+use satmap_runtime::glam::{DVec2, Vec3};
+use satmap_runtime::map_frame::wire;
+use satmap_runtime::placement::{REGION_ALIGN, REGIONS, RuntimeRegions};
+use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};
+use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
+
+use crate::ffi_types::{
+    SATMAP_NUM_CAMERAS, SATMAP_REGION_COUNT, SatmapFrame, SatmapRegion, SatmapRegionInfo,
+    SatmapSliceInfo,
+};
+use crate::status::SatmapStatus;
+
+/// Region names with their NUL, in [`REGIONS`] order.
+const REGION_NAMES: [&CStr; SATMAP_REGION_COUNT] = [
+    c"value_features",
+    c"gkt_lut",
+    c"bev_query",
+    c"gkt_weights",
+    c"gathered",
+    c"camera_bev",
+    c"satellite_crop",
+    c"satellite_bev",
+    c"class_logits",
+    c"points",
+];
+
+/// The satellite crop the caller hands in with each frame.
+struct CallerCrop {
+    rgb: *const u8,
+    len: usize,
+}
+
+impl SatelliteSource for CallerCrop {
+    fn crop(&mut self, _pose: &EgoPose, _spec: &CropSpec, out: &mut [u8]) -> Coverage {
+        if self.rgb.is_null() {
+            out.fill(0);
+            return Coverage::None;
+        }
+        if self.len != out.len() {
+            out.fill(0);
+            return Coverage::Corrupt;
+        }
+        // SAFETY: the caller guarantees `len` readable bytes at `rgb` until the step ends.
+        out.copy_from_slice(unsafe { core::slice::from_raw_parts(self.rgb, self.len) });
+        Coverage::Full
+    }
+}
+
+/// An opaque runtime: created by `satmap_create`, freed by `satmap_destroy`.
+pub struct SatmapRuntime {
+    map: SatMap<TractEngine, CallerCrop>,
+    message: heapless::String<256>,
+}
+
+impl SatmapRuntime {
+    fn fail(&mut self, status: SatmapStatus, what: &dyn core::fmt::Display) -> SatmapStatus {
+        self.message.clear();
+        // A message longer than the buffer is cut, never an error.
+        let _ = write!(self.message, "{what}");
+        status
+    }
+}
+
+/// Run `f`, turning a panic into [`SatmapStatus::Panic`].
+fn guard(f: impl FnOnce() -> SatmapStatus) -> SatmapStatus {
+    catch_unwind(AssertUnwindSafe(f)).unwrap_or(SatmapStatus::Panic)
+}
+
+/// Name, size and alignment of caller region `id` (`0..SATMAP_REGION_COUNT`).
+///
+/// # Safety
+/// `info` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_region_info(
+    id: usize,
+    info: *mut SatmapRegionInfo,
+) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or valid, per the contract.
+        let Some(info) = (unsafe { info.as_mut() }) else {
+            return SatmapStatus::NullArgument;
+        };
+        let (Some(spec), Some(name)) = (REGIONS.get(id), REGION_NAMES.get(id)) else {
+            return SatmapStatus::InvalidArgument;
+        };
+        *info = SatmapRegionInfo {
+            name: name.as_ptr(),
+            bytes: spec.bytes,
+            align: REGION_ALIGN,
+        };
+        SatmapStatus::Ok
+    })
+}
+
+fn path_of<'a>(p: *const c_char) -> Result<&'a Path, SatmapStatus> {
+    if p.is_null() {
+        return Err(SatmapStatus::NullArgument);
+    }
+    // SAFETY: non-NULL and NUL-terminated, per the contract.
+    let s = unsafe { CStr::from_ptr(p) };
+    s.to_str()
+        .map(Path::new)
+        .map_err(|_| SatmapStatus::InvalidArgument)
+}
+
+/// Create a runtime over the caller's regions: load and verify the bundle directory, read the
+/// calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
+/// `SATMAP_REGION_COUNT` entries in region id order; each must stay valid and untouched until
+/// `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
+///
+/// # Safety
+/// `regions` points to `region_count` entries whose memory is valid as stated; the paths are
+/// NUL-terminated; `out` is valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_create(
+    regions: *const SatmapRegion,
+    region_count: usize,
+    bundle_dir: *const c_char,
+    calibration_toml: *const c_char,
+    out: *mut *mut SatmapRuntime,
+) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or valid, per the contract.
+        let Some(out) = (unsafe { out.as_mut() }) else {
+            return SatmapStatus::NullArgument;
+        };
+        *out = core::ptr::null_mut();
+        if regions.is_null() {
+            return SatmapStatus::NullArgument;
+        }
+        if region_count != SATMAP_REGION_COUNT {
+            return SatmapStatus::InvalidArgument;
+        }
+        // SAFETY: `region_count` entries, per the contract.
+        let given = unsafe { core::slice::from_raw_parts(regions, region_count) };
+        if given.iter().any(|r| r.data.is_null()) {
+            return SatmapStatus::NullArgument;
+        }
+        let (bundle, calibration) = match (path_of(bundle_dir), path_of(calibration_toml)) {
+            (Ok(b), Ok(c)) => (b, c),
+            (Err(e), _) | (_, Err(e)) => return e,
+        };
+        // SAFETY: each region is valid, unaliased and outlives the runtime (the contract:
+        // untouched until satmap_destroy), which is what `'static` stands for here.
+        let region =
+            |i: usize| unsafe { core::slice::from_raw_parts_mut(given[i].data, given[i].len) };
+        let placed = RuntimeRegions {
+            value_features: region(0),
+            gkt_lut: region(1),
+            bev_query: region(2),
+            gkt_weights: region(3),
+            gathered: region(4),
+            camera_bev: region(5),
+            satellite_crop: region(6),
+            satellite_bev: region(7),
+            class_logits: region(8),
+            points: region(9),
+        };
+        let Ok(calibration) = from_toml_file(calibration) else {
+            return SatmapStatus::Calibration;
+        };
+        let Ok(engine) = TractEngine::open(bundle) else {
+            return SatmapStatus::Bundle;
+        };
+        let satellite = CallerCrop {
+            rgb: core::ptr::null(),
+            len: 0,
+        };
+        match SatMap::in_regions(
+            engine,
+            &calibration,
+            satellite,
+            FrameLimits::DEFAULT,
+            placed,
+        ) {
+            Ok(map) => {
+                *out = Box::into_raw(Box::new(SatmapRuntime {
+                    map,
+                    message: heapless::String::new(),
+                }));
+                SatmapStatus::Ok
+            }
+            Err(e) => SatmapStatus::from(&e),
+        }
+    })
+}
+
+/// Free a runtime (NULL is ignored); its regions belong to the caller again.
+///
+/// # Safety
+/// `rt` is NULL or from `satmap_create`, and not used afterwards.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_destroy(rt: *mut SatmapRuntime) {
+    let _ = guard(|| {
+        if !rt.is_null() {
+            // SAFETY: from Box::into_raw in satmap_create, freed once.
+            drop(unsafe { Box::from_raw(rt) });
+        }
+        SatmapStatus::Ok
+    });
+}
+
+/// The Rust frame a C frame describes.
+///
+/// # Safety
+/// Every non-NULL pointer of `f` is valid for its stated length for `'a`.
+unsafe fn frame_of<'a>(f: &'a SatmapFrame) -> Frame<'a> {
+    let images = core::array::from_fn::<_, SATMAP_NUM_CAMERAS, _>(|c| {
+        let cam = &f.cameras[c];
+        (!cam.rgb.is_null()).then(|| CameraImage {
+            width_px: cam.width_px,
+            height_px: cam.height_px,
+            // SAFETY: per this function's contract.
+            rgb: unsafe { core::slice::from_raw_parts(cam.rgb, cam.len) },
+            capture_us: cam.capture_us,
+            valid: cam.valid != 0,
+        })
+    });
+    Frame {
+        sequence: f.sequence,
+        timestamp_us: f.timestamp_us,
+        pose: EgoPose::new(DVec2::from_array(f.position_m), f.yaw_rad),
+        motion: EgoMotion {
+            acceleration_mps2: Vec3::from_array(f.acceleration_mps2),
+            rotation_rate_radps: Vec3::from_array(f.rotation_rate_radps),
+            velocity_mps: Vec3::from_array(f.velocity_mps),
+        },
+        images,
+    }
+}
+
+/// Run `f` on the runtime and frame behind the pointers.
+fn with_frame(
+    rt: *mut SatmapRuntime,
+    frame: *const SatmapFrame,
+    f: impl FnOnce(&mut SatmapRuntime, &Frame<'_>) -> SatmapStatus,
+) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or from satmap_create; NULL or a valid frame, per the contract.
+        let (Some(rt), Some(frame)) = (unsafe { rt.as_mut() }, unsafe { frame.as_ref() }) else {
+            return SatmapStatus::NullArgument;
+        };
+        // SAFETY: the frame's pointers are valid for this call, per the contract.
+        let rust_frame = unsafe { frame_of(frame) };
+        *rt.map.satellite_mut() = CallerCrop {
+            rgb: frame.satellite_rgb,
+            len: frame.satellite_len,
+        };
+        f(rt, &rust_frame)
+    })
+}
+
+/// Run one whole step on `frame`.
+///
+/// # Safety
+/// `rt` from `satmap_create`; `frame` and its pointers valid for the call.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_step(
+    rt: *mut SatmapRuntime,
+    frame: *const SatmapFrame,
+) -> SatmapStatus {
+    with_frame(rt, frame, |rt, f| match rt.map.step(f) {
+        Ok(_) => SatmapStatus::Ok,
+        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
+    })
+}
+
+/// Start a staged step: check `frame`, run nothing. The frame and its pointers must stay valid
+/// until `satmap_step_finish` or `satmap_step_abort`.
+///
+/// # Safety
+/// As [`satmap_step`], with the longer lifetime.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_step_begin(
+    rt: *mut SatmapRuntime,
+    frame: *const SatmapFrame,
+) -> SatmapStatus {
+    with_frame(rt, frame, |rt, f| match rt.map.step_begin(f) {
+        Ok(()) => SatmapStatus::Ok,
+        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
+    })
+}
+
+/// Run the next slice of the staged step; `frame` is the one given to `satmap_step_begin`.
+/// `info` (may be NULL) receives the slice and how many remain.
+///
+/// # Safety
+/// As [`satmap_step_begin`]; `info` NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_step_run_next(
+    rt: *mut SatmapRuntime,
+    frame: *const SatmapFrame,
+    info: *mut SatmapSliceInfo,
+) -> SatmapStatus {
+    with_frame(rt, frame, |rt, f| match rt.map.step_run_next(f) {
+        Ok(done) => {
+            // SAFETY: NULL or valid, per the contract.
+            if let Some(info) = unsafe { info.as_mut() } {
+                *info = SatmapSliceInfo {
+                    slice: done.slice.into(),
+                    remaining: done.remaining,
+                };
+            }
+            SatmapStatus::Ok
+        }
+        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
+    })
+}
+
+/// Publish the staged step's map.
+///
+/// # Safety
+/// `rt` from `satmap_create`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_step_finish(rt: *mut SatmapRuntime) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or from satmap_create.
+        let Some(rt) = (unsafe { rt.as_mut() }) else {
+            return SatmapStatus::NullArgument;
+        };
+        match rt.map.step_finish() {
+            Ok(_) => SatmapStatus::Ok,
+            Err(e) => rt.fail(SatmapStatus::from(&e), &e),
+        }
+    })
+}
+
+/// Drop the staged step in progress, if any.
+///
+/// # Safety
+/// `rt` from `satmap_create`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_step_abort(rt: *mut SatmapRuntime) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or from satmap_create.
+        let Some(rt) = (unsafe { rt.as_mut() }) else {
+            return SatmapStatus::NullArgument;
+        };
+        rt.map.step_abort();
+        SatmapStatus::Ok
+    })
+}
+
+/// Serialise the last published map frame with its E2E protection (layout in
+/// ARCHITECTURE.md, "Protected map frame") into `buf`; `*written` receives its length.
+/// `SATMAP_MAX_WIRE_BYTES` always suffices.
+///
+/// # Safety
+/// `rt` from `satmap_create`; `buf` valid for `cap` bytes; `written` valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_map_frame(
+    rt: *const SatmapRuntime,
+    data_id: u32,
+    buf: *mut u8,
+    cap: usize,
+    written: *mut usize,
+) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or valid, per the contract.
+        let (Some(rt), Some(written)) = (unsafe { rt.as_ref() }, unsafe { written.as_mut() })
+        else {
+            return SatmapStatus::NullArgument;
+        };
+        *written = 0;
+        if buf.is_null() {
+            return SatmapStatus::NullArgument;
+        }
+        let Some(map) = rt.map.last_map() else {
+            return SatmapStatus::NoMapYet;
+        };
+        // SAFETY: `cap` writable bytes, per the contract.
+        let out = unsafe { core::slice::from_raw_parts_mut(buf, cap) };
+        match wire::serialise(map, data_id, out) {
+            Ok(n) => {
+                *written = n;
+                SatmapStatus::Ok
+            }
+            Err(e) => SatmapStatus::from(&e),
+        }
+    })
+}
+
+/// Check a received serialised map frame (length, CRC-32/AUTOSAR, data id); on success
+/// `*sequence` and `*counter` (each may be NULL) receive the frame's sequence and E2E counter.
+///
+/// # Safety
+/// `bytes` valid for `len` bytes; `sequence` and `counter` NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_check_map_frame(
+    bytes: *const u8,
+    len: usize,
+    data_id: u32,
+    sequence: *mut u64,
+    counter: *mut u16,
+) -> SatmapStatus {
+    guard(|| {
+        if bytes.is_null() {
+            return SatmapStatus::NullArgument;
+        }
+        // SAFETY: `len` readable bytes, per the contract.
+        let frame = unsafe { core::slice::from_raw_parts(bytes, len) };
+        match wire::check(frame, data_id) {
+            Ok(c) => {
+                // SAFETY: NULL or valid, per the contract.
+                if let Some(s) = unsafe { sequence.as_mut() } {
+                    *s = c.sequence;
+                }
+                // SAFETY: NULL or valid, per the contract.
+                if let Some(n) = unsafe { counter.as_mut() } {
+                    *n = c.counter;
+                }
+                SatmapStatus::Ok
+            }
+            Err(e) => SatmapStatus::from(&e),
+        }
+    })
+}
+
+/// Rebuild the look-up table for a new calibration file (TOML); the previous one stays in use
+/// on failure.
+///
+/// # Safety
+/// `rt` from `satmap_create`; `calibration_toml` NUL-terminated.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_recalibrate(
+    rt: *mut SatmapRuntime,
+    calibration_toml: *const c_char,
+) -> SatmapStatus {
+    guard(|| {
+        // SAFETY: NULL or from satmap_create.
+        let Some(rt) = (unsafe { rt.as_mut() }) else {
+            return SatmapStatus::NullArgument;
+        };
+        let path = match path_of(calibration_toml) {
+            Ok(p) => p,
+            Err(e) => return e,
+        };
+        let calibration = match from_toml_file(path) {
+            Ok(c) => c,
+            Err(e) => return rt.fail(SatmapStatus::Calibration, &e),
+        };
+        match rt.map.recalibrate(&calibration) {
+            Ok(()) => SatmapStatus::Ok,
+            Err(e) => rt.fail(SatmapStatus::Calibration, &e),
+        }
+    })
+}
+
+/// Copy the message of the runtime's last failed call into `buf` (NUL-terminated, cut to
+/// `cap`); returns the message length without the NUL.
+///
+/// # Safety
+/// `rt` from `satmap_create`; `buf` NULL or valid for `cap` bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_last_error(
+    rt: *const SatmapRuntime,
+    buf: *mut c_char,
+    cap: usize,
+) -> usize {
+    catch_unwind(AssertUnwindSafe(|| {
+        // SAFETY: NULL or from satmap_create.
+        let Some(rt) = (unsafe { rt.as_ref() }) else {
+            return 0;
+        };
+        let msg = rt.message.as_bytes();
+        if !buf.is_null() && cap > 0 {
+            let n = msg.len().min(cap - 1);
+            // SAFETY: `cap` writable bytes, per the contract; n + 1 <= cap.
+            unsafe {
+                core::ptr::copy_nonoverlapping(msg.as_ptr(), buf.cast::<u8>(), n);
+                *buf.add(n) = 0;
+            }
+        }
+        msg.len()
+    }))
+    .unwrap_or(0)
+}

@@ -1,0 +1,579 @@
+//! The ECU integration surface over the committed `test` bundle: the C API (called from Rust
+//! here, from C in `examples/c/replay.c`), caller-placed regions, the staged step and the
+//! protected map frame, on the committed scenario `examples/c/scenario.bin` (made from the
+//! golden inputs; `SATMAP_BLESS=1` rewrites it and `expected.txt`, the Rust run's digests that
+//! the C example compares against).
+
+mod common;
+
+use std::ffi::CString;
+use std::path::PathBuf;
+
+use common::{GoldenFrame, bundle_dir, calibration, engine, root};
+use satmap_capi::{
+    SATMAP_DEFAULT_DATA_ID, SATMAP_MAX_WIRE_BYTES, SATMAP_REGION_COUNT, SatmapCameraImage,
+    SatmapFrame, SatmapRegion, SatmapRegionInfo, SatmapRuntime, SatmapSliceInfo, SatmapStatus,
+};
+use satmap_runtime::frame::FrameLimits;
+use satmap_runtime::map_frame::wire;
+use satmap_runtime::placement::{REGION_ALIGN, REGIONS};
+use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};
+use satmap_runtime::{
+    CameraImage, CameraState, EgoPose, Frame, InitError, MapFrame, RuntimeRegions, SatMap,
+};
+
+/// One frame of the scenario.
+#[derive(Clone, Copy)]
+struct Step {
+    sequence: u64,
+    set: usize,
+    /// Bit c: camera c delivered an image.
+    present: u8,
+    satellite: bool,
+    staged: bool,
+}
+
+const STEPS: [Step; 4] = [
+    Step {
+        sequence: 1,
+        set: 0,
+        present: 0b11_1111,
+        satellite: true,
+        staged: false,
+    },
+    Step {
+        sequence: 2,
+        set: 1,
+        present: 0b11_1111,
+        satellite: true,
+        staged: true,
+    },
+    Step {
+        sequence: 3,
+        set: 0,
+        present: 0b11_0111,
+        satellite: true,
+        staged: false,
+    },
+    Step {
+        sequence: 4,
+        set: 1,
+        present: 0b00_0001,
+        satellite: false,
+        staged: true,
+    },
+];
+
+fn timestamp_us(sequence: u64) -> u64 {
+    1_000_000 + sequence * 500_000
+}
+
+fn scenario_path() -> PathBuf {
+    root().join("examples/c/scenario.bin")
+}
+
+fn expected_path() -> PathBuf {
+    root().join("examples/c/expected.txt")
+}
+
+fn bless() -> bool {
+    std::env::var_os("SATMAP_BLESS").is_some()
+}
+
+/// The scenario file, from the two golden frames (format in `examples/c/replay.c`).
+fn scenario_bytes(sets: &[GoldenFrame; 2]) -> Vec<u8> {
+    let dims = satmap_runtime::ModelDims::test_config();
+    let mut b = b"SMSCEN01".to_vec();
+    for v in [
+        STEPS.len(),
+        sets.len(),
+        dims.image_w,
+        dims.image_h,
+        dims.sat_w,
+        dims.sat_h,
+    ] {
+        b.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    for g in sets {
+        b.extend_from_slice(&g.images);
+        b.extend_from_slice(&g.satellite);
+    }
+    for s in STEPS {
+        let g = &sets[s.set];
+        b.extend_from_slice(&s.sequence.to_le_bytes());
+        b.extend_from_slice(&timestamp_us(s.sequence).to_le_bytes());
+        for v in [g.pose.position_m.x, g.pose.position_m.y, g.pose.yaw_rad] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        let m = g.motion;
+        for v in [m.acceleration_mps2, m.rotation_rate_radps, m.velocity_mps] {
+            for x in v.to_array() {
+                b.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+        b.extend_from_slice(&(s.set as u32).to_le_bytes());
+        b.extend_from_slice(&[s.present, u8::from(s.satellite), u8::from(s.staged), 0]);
+    }
+    b
+}
+
+/// The crop the caller hands in with each frame (as the C API's source does).
+struct SwitchCrop(Option<Vec<u8>>);
+
+impl SatelliteSource for SwitchCrop {
+    fn crop(&mut self, _pose: &EgoPose, _spec: &CropSpec, out: &mut [u8]) -> Coverage {
+        match &self.0 {
+            Some(c) if c.len() == out.len() => {
+                out.copy_from_slice(c);
+                Coverage::Full
+            }
+            _ => {
+                out.fill(0);
+                Coverage::None
+            }
+        }
+    }
+}
+
+fn frame<'a>(g: &'a GoldenFrame, s: Step) -> Frame<'a> {
+    let per = g.images.len() / 6;
+    let ts = timestamp_us(s.sequence);
+    Frame {
+        sequence: s.sequence,
+        timestamp_us: ts,
+        pose: g.pose,
+        motion: g.motion,
+        images: core::array::from_fn(|c| {
+            (s.present >> c & 1 == 1).then(|| CameraImage {
+                width_px: 320,
+                height_px: 180,
+                rgb: &g.images[c * per..(c + 1) * per],
+                capture_us: ts,
+                valid: true,
+            })
+        }),
+    }
+}
+
+/// The Rust run of the scenario: one-call steps on heap buffers.
+fn rust_run(sets: &[GoldenFrame; 2]) -> Vec<MapFrame> {
+    let mut map = SatMap::new(engine(), &calibration(), SwitchCrop(None)).unwrap();
+    STEPS
+        .iter()
+        .map(|&s| {
+            let g = &sets[s.set];
+            map.satellite_mut().0 = s.satellite.then(|| g.satellite.clone());
+            map.step(&frame(g, s)).unwrap().clone()
+        })
+        .collect()
+}
+
+fn sets() -> [GoldenFrame; 2] {
+    [GoldenFrame::load(0), GoldenFrame::load(1)]
+}
+
+#[test]
+fn the_committed_scenario_and_digests_are_current() {
+    let sets = sets();
+    let bytes = scenario_bytes(&sets);
+    let maps = rust_run(&sets);
+    let expected: String = maps
+        .iter()
+        .map(|m| format!("{} {:016x}\n", m.sequence, m.digest))
+        .collect();
+    if bless() {
+        std::fs::write(scenario_path(), &bytes).unwrap();
+        std::fs::write(expected_path(), &expected).unwrap();
+    }
+    assert!(
+        std::fs::read(scenario_path()).unwrap() == bytes,
+        "examples/c/scenario.bin is stale: rerun with SATMAP_BLESS=1"
+    );
+    assert_eq!(
+        std::fs::read_to_string(expected_path()).unwrap(),
+        expected,
+        "examples/c/expected.txt is stale: rerun with SATMAP_BLESS=1"
+    );
+    // The scenario exercises what it claims: dropout and a degraded step.
+    assert_eq!(maps[2].health.cameras[3], CameraState::Missing);
+    assert_eq!(maps[3].health.cameras_dropped(), 0b11_1110);
+    assert!(maps[3].health.degraded && !maps[0].health.degraded);
+    println!("scenario digests:\n{expected}");
+}
+
+/// `len` zeroed bytes at a `REGION_ALIGN` boundary, leaked (the test stands in for a linker
+/// script's static sections).
+fn region(len: usize) -> &'static mut [u8] {
+    let v: &'static mut [u8] = Vec::leak(vec![0u8; len + REGION_ALIGN]);
+    let skip = v.as_ptr().align_offset(REGION_ALIGN);
+    &mut v[skip..skip + len]
+}
+
+fn regions(short: Option<usize>) -> RuntimeRegions {
+    let r = |i: usize| region(REGIONS[i].bytes - usize::from(short == Some(i)));
+    RuntimeRegions {
+        value_features: r(0),
+        gkt_lut: r(1),
+        bev_query: r(2),
+        gkt_weights: r(3),
+        gathered: r(4),
+        camera_bev: r(5),
+        satellite_crop: r(6),
+        satellite_bev: r(7),
+        class_logits: r(8),
+        points: r(9),
+    }
+}
+
+#[test]
+fn placed_regions_step_like_the_heap_and_a_short_or_misaligned_region_is_named() {
+    let sets = sets();
+    let heap = rust_run(&sets);
+    let mut map = SatMap::in_regions(
+        engine(),
+        &calibration(),
+        SwitchCrop(None),
+        FrameLimits::DEFAULT,
+        regions(None),
+    )
+    .unwrap();
+    for (s, want) in STEPS.iter().zip(&heap) {
+        let g = &sets[s.set];
+        map.satellite_mut().0 = s.satellite.then(|| g.satellite.clone());
+        assert_eq!(map.step(&frame(g, *s)).unwrap(), want);
+    }
+    for (i, spec) in REGIONS.iter().enumerate() {
+        let e = SatMap::in_regions(
+            engine(),
+            &calibration(),
+            SwitchCrop(None),
+            FrameLimits::DEFAULT,
+            regions(Some(i)),
+        )
+        .err();
+        assert_eq!(
+            e,
+            Some(InitError::RegionTooSmall {
+                region: spec.name,
+                needed_bytes: spec.bytes,
+                capacity_bytes: spec.bytes - 1,
+            }),
+            "region {} one byte short",
+            spec.name
+        );
+    }
+    let mut r = regions(None);
+    let v: &'static mut [u8] = Vec::leak(vec![0u8; REGIONS[2].bytes + REGION_ALIGN + 1]);
+    let skip = v.as_ptr().align_offset(REGION_ALIGN) + 1;
+    r.bev_query = &mut v[skip..skip + REGIONS[2].bytes];
+    assert_eq!(
+        SatMap::in_regions(
+            engine(),
+            &calibration(),
+            SwitchCrop(None),
+            FrameLimits::DEFAULT,
+            r
+        )
+        .err(),
+        Some(InitError::RegionMisaligned {
+            region: "bev_query",
+            align: REGION_ALIGN
+        })
+    );
+}
+
+#[test]
+fn staged_steps_equal_one_call_steps_over_a_replay() {
+    let sets = sets();
+    let one_call = rust_run(&sets);
+    let mut map = SatMap::new(engine(), &calibration(), SwitchCrop(None)).unwrap();
+    for (s, want) in STEPS.iter().zip(&one_call) {
+        let g = &sets[s.set];
+        map.satellite_mut().0 = s.satellite.then(|| g.satellite.clone());
+        let f = frame(g, *s);
+        map.step_begin(&f).unwrap();
+        // A frame arriving mid-step is refused, and the step goes on.
+        let next = Frame {
+            sequence: s.sequence + 1,
+            ..f
+        };
+        assert_eq!(
+            map.step(&next).err(),
+            Some(satmap_runtime::StepError::StepInProgress {
+                sequence: s.sequence
+            })
+        );
+        assert!(map.step_begin(&next).is_err());
+        assert!(matches!(
+            map.step_finish().err(),
+            Some(satmap_runtime::StepError::StepIncomplete { .. })
+        ));
+        let mut slices = Vec::new();
+        loop {
+            let done = map.step_run_next(&f).unwrap();
+            slices.push(done.slice);
+            if !done.more() {
+                break;
+            }
+        }
+        // One slice per camera that takes part, plus five.
+        assert_eq!(slices.len(), s.present.count_ones() as usize + 5);
+        assert_eq!(map.step_finish().unwrap(), want, "frame {}", s.sequence);
+    }
+}
+
+fn c_frame(g: &GoldenFrame, s: Step) -> SatmapFrame {
+    let per = g.images.len() / 6;
+    let ts = timestamp_us(s.sequence);
+    SatmapFrame {
+        sequence: s.sequence,
+        timestamp_us: ts,
+        position_m: g.pose.position_m.to_array(),
+        yaw_rad: g.pose.yaw_rad,
+        acceleration_mps2: g.motion.acceleration_mps2.to_array(),
+        rotation_rate_radps: g.motion.rotation_rate_radps.to_array(),
+        velocity_mps: g.motion.velocity_mps.to_array(),
+        cameras: core::array::from_fn(|c| SatmapCameraImage {
+            rgb: if s.present >> c & 1 == 1 {
+                g.images[c * per..].as_ptr()
+            } else {
+                std::ptr::null()
+            },
+            len: per,
+            width_px: 320,
+            height_px: 180,
+            capture_us: ts,
+            valid: 1,
+        }),
+        satellite_rgb: if s.satellite {
+            g.satellite.as_ptr()
+        } else {
+            std::ptr::null()
+        },
+        satellite_len: g.satellite.len(),
+    }
+}
+
+#[test]
+fn the_c_api_computes_the_rust_run_and_protects_its_output() {
+    let sets = sets();
+    let rust = rust_run(&sets);
+    let c_regions: Vec<SatmapRegion> = (0..SATMAP_REGION_COUNT)
+        .map(|i| {
+            let mut info = SatmapRegionInfo {
+                name: std::ptr::null(),
+                bytes: 0,
+                align: 0,
+            };
+            // SAFETY: valid out pointer.
+            assert_eq!(
+                unsafe { satmap_capi::satmap_region_info(i, &mut info) },
+                SatmapStatus::Ok
+            );
+            // SAFETY: a static NUL-terminated name.
+            let name = unsafe { std::ffi::CStr::from_ptr(info.name) };
+            assert_eq!(name.to_str().unwrap(), REGIONS[i].name);
+            let r = region(info.bytes);
+            SatmapRegion {
+                data: r.as_mut_ptr(),
+                len: r.len(),
+            }
+        })
+        .collect();
+    let bundle = CString::new(bundle_dir().to_str().unwrap()).unwrap();
+    let cal = CString::new(
+        root()
+            .join("models/calibration/nuscenes_like.toml")
+            .to_str()
+            .unwrap(),
+    )
+    .unwrap();
+    let mut rt: *mut SatmapRuntime = std::ptr::null_mut();
+    // SAFETY: regions as the header states; NUL-terminated paths; valid out pointer.
+    let status = unsafe {
+        satmap_capi::satmap_create(
+            c_regions.as_ptr(),
+            c_regions.len(),
+            bundle.as_ptr(),
+            cal.as_ptr(),
+            &mut rt,
+        )
+    };
+    assert_eq!(status, SatmapStatus::Ok);
+    let mut buf = vec![0u8; SATMAP_MAX_WIRE_BYTES];
+    for (s, want) in STEPS.iter().zip(&rust) {
+        let f = c_frame(&sets[s.set], *s);
+        // SAFETY: rt from satmap_create; the frame's pointers outlive the calls.
+        unsafe {
+            if s.staged {
+                assert_eq!(satmap_capi::satmap_step_begin(rt, &f), SatmapStatus::Ok);
+                assert_eq!(
+                    satmap_capi::satmap_step_begin(rt, &f),
+                    SatmapStatus::StepInProgress
+                );
+                let mut info = SatmapSliceInfo {
+                    slice: satmap_capi::SatmapSlice::BevQuery,
+                    remaining: 0,
+                };
+                loop {
+                    assert_eq!(
+                        satmap_capi::satmap_step_run_next(rt, &f, &mut info),
+                        SatmapStatus::Ok
+                    );
+                    if info.remaining == 0 {
+                        break;
+                    }
+                }
+                assert_eq!(satmap_capi::satmap_step_finish(rt), SatmapStatus::Ok);
+            } else {
+                assert_eq!(satmap_capi::satmap_step(rt, &f), SatmapStatus::Ok);
+            }
+            let mut n = 0usize;
+            assert_eq!(
+                satmap_capi::satmap_map_frame(
+                    rt,
+                    SATMAP_DEFAULT_DATA_ID,
+                    buf.as_mut_ptr(),
+                    buf.len(),
+                    &mut n
+                ),
+                SatmapStatus::Ok
+            );
+            let mut seq = 0u64;
+            assert_eq!(
+                satmap_capi::satmap_check_map_frame(
+                    buf.as_ptr(),
+                    n,
+                    SATMAP_DEFAULT_DATA_ID,
+                    &mut seq,
+                    std::ptr::null_mut()
+                ),
+                SatmapStatus::Ok
+            );
+            assert_eq!(seq, s.sequence);
+            let back = wire::deserialise(&buf[..n], SATMAP_DEFAULT_DATA_ID).unwrap();
+            assert_eq!(back.digest, want.digest);
+            assert_eq!(back.elements, want.elements);
+            assert_eq!(back.health, want.health);
+            // Every single-bit flip of the serialised frame fails the check.
+            for bit in 0..n * 8 {
+                buf[bit / 8] ^= 1 << (bit % 8);
+                assert_ne!(
+                    satmap_capi::satmap_check_map_frame(
+                        buf.as_ptr(),
+                        n,
+                        SATMAP_DEFAULT_DATA_ID,
+                        std::ptr::null_mut(),
+                        std::ptr::null_mut()
+                    ),
+                    SatmapStatus::Ok,
+                    "bit {bit} flipped in frame {}",
+                    s.sequence
+                );
+                buf[bit / 8] ^= 1 << (bit % 8);
+            }
+        }
+    }
+    // A rejected frame leaves the runtime usable, with a message.
+    let mut old = c_frame(&sets[0], STEPS[0]);
+    old.sequence = 1;
+    // SAFETY: as above.
+    unsafe {
+        assert_eq!(
+            satmap_capi::satmap_step(rt, &old),
+            SatmapStatus::FrameRejected
+        );
+        let mut msg = [0i8; 128];
+        let len = satmap_capi::satmap_last_error(rt, msg.as_mut_ptr().cast(), msg.len());
+        assert!(len > 0);
+        assert_eq!(
+            satmap_capi::satmap_step(std::ptr::null_mut(), &old),
+            SatmapStatus::NullArgument
+        );
+        satmap_capi::satmap_destroy(rt);
+    }
+}
+
+#[test]
+fn every_camera_dropped_in_turn_matches_the_reference() {
+    let f = GoldenFrame::load(0);
+    let dropout = common::Golden::load("dropout.safetensors");
+    let mut map = SatMap::new(
+        engine(),
+        &calibration(),
+        SwitchCrop(Some(f.satellite.clone())),
+    )
+    .unwrap();
+    let configs: Vec<(String, u8)> = (0..6)
+        .map(|c| (format!("cam{c}"), 0b11_1111 & !(1u8 << c)))
+        .chain([("front_only".to_string(), 0b1)])
+        .collect();
+    let tol = 1e-4;
+    for (k, (name, present)) in configs.iter().enumerate() {
+        let s = Step {
+            sequence: k as u64 + 1,
+            set: 0,
+            present: *present,
+            satellite: true,
+            staged: false,
+        };
+        let out = map.step(&frame(&f, s)).unwrap().clone();
+        for (stage, got) in [
+            ("gathered", map.gathered()),
+            ("camera_bev", map.camera_bev()),
+            ("class_logits", map.logits()),
+            ("points", map.points()),
+        ] {
+            let want = dropout.f32s(&format!("{name}_{stage}"));
+            let d = common::max_abs_diff(got, &want);
+            assert!(d <= tol, "{name} {stage}: max abs diff {d} > {tol}");
+        }
+        // The health word names exactly the cameras left out.
+        assert_eq!(out.health.cameras_dropped(), !present & 0b11_1111, "{name}");
+        for c in 0..6 {
+            let want = if present >> c & 1 == 1 {
+                CameraState::Used
+            } else {
+                CameraState::Missing
+            };
+            assert_eq!(out.health.cameras[c], want, "{name} camera {c}");
+        }
+    }
+    // Stale and invalid images are left out the same way, with their own states.
+    let s = Step {
+        sequence: 8,
+        set: 0,
+        present: 0b11_1111,
+        satellite: true,
+        staged: false,
+    };
+    let mut fr = frame(&f, s);
+    let stale_us = fr.timestamp_us - FrameLimits::DEFAULT.max_camera_age_us - 1;
+    if let Some(a) = fr.images[1].as_mut() {
+        a.capture_us = stale_us;
+    }
+    if let Some(b) = fr.images[2].as_mut() {
+        b.valid = false;
+    }
+    let out = map.step(&fr).unwrap().clone();
+    assert_eq!(out.health.cameras[1], CameraState::Stale);
+    assert_eq!(out.health.cameras[2], CameraState::Invalid);
+    // With every camera gone the step fails and the runtime stays usable.
+    let none = Frame {
+        sequence: 9,
+        timestamp_us: fr.timestamp_us + 1,
+        images: [None; 6],
+        ..fr
+    };
+    assert!(matches!(
+        map.step(&none),
+        Err(satmap_runtime::StepError::NoCameraLeft { .. })
+    ));
+    let again = Step { sequence: 10, ..s };
+    let mut again_frame = frame(&f, again);
+    again_frame.timestamp_us = fr.timestamp_us + 2;
+    for im in again_frame.images.iter_mut().flatten() {
+        im.capture_us = again_frame.timestamp_us;
+    }
+    assert!(map.step(&again_frame).is_ok());
+}
