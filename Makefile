@@ -8,12 +8,12 @@ PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-python lint nostd venv train fuzz
+.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz
 
 demo:
 	$(CARGO) run -p satmap-sim -- drive --out out/demo
 
-test: lint nostd test-rust test-python
+test: lint nostd test-rust test-c test-python test-paper
 
 lint:
 	$(CARGO) fmt --all -- --check
@@ -55,6 +55,42 @@ $(PY_VENV)/.installed: models/pyproject.toml
 
 test-python: venv
 	$(PY) -m pytest models -q
+
+# The `paper` product variant end to end: export the paper config (seeded weights, ~15 s) into
+# models/build/paper, build satmap-sim with its memory layout (SATMAP_LAYOUT=layouts/paper.toml:
+# the layout is a build input, so this rebuilds the workspace crates only, and the next build
+# without it rebuilds them back) and drive PAPER_FRAMES frames through SatMap in the arena; fails
+# when the drive does (a region too small, the arena exhausted, a budget exceeded). In `test`
+# after test-rust, so CI builds both layouts. See README "Memory layout per product variant".
+PAPER_BUNDLE := models/build/paper
+PAPER_FRAMES ?= 2
+SATMAP_PY_SOURCES := $(shell find models/src/satmap_ref -name '*.py')
+test-paper: $(PAPER_BUNDLE)/manifest.sha256
+	SATMAP_LAYOUT=layouts/paper.toml $(CARGO) run --profile test -p satmap-sim -- drive \
+	  --bundle $(PAPER_BUNDLE) --frames $(PAPER_FRAMES) --quiet
+
+$(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
+	cd models && .venv/bin/python -m satmap_ref.export --config paper --out build/paper
+
+# The C API from C: builds the static library, compiles examples/c/replay.c with the system C
+# compiler (warnings are errors) and replays the committed scenario over static caller-owned
+# regions, natively (digests must equal the Rust run's, examples/c/expected.txt, checked by
+# tests/c_api.rs; every CRC check and every bit flip of a frame caught), then the first two
+# frames again under valgrind (any memory error or leak fails; see replay.c on why digests are
+# not compared there).
+CAPI_LIB := target/debug/libsatmap_capi.a
+C_REPLAY := target/c/replay
+C_REPLAY_ARGS := models/bundles/test models/calibration/nuscenes_like.toml examples/c/scenario.bin \
+  examples/c/expected.txt
+test-c:
+	$(CARGO) build --profile test -p satmap-capi
+	mkdir -p target/c
+	$(CC) -std=c11 -Wall -Wextra -Werror -g -O1 -I runtime/capi/include examples/c/replay.c \
+	  $(CAPI_LIB) -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o $(C_REPLAY)
+	$(C_REPLAY) $(C_REPLAY_ARGS)
+	command -v valgrind >/dev/null || { apt-get update -qq && apt-get install -y -qq valgrind; }
+	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite,indirect \
+	  --suppressions=examples/c/valgrind.supp --quiet $(C_REPLAY) $(C_REPLAY_ARGS) memcheck
 
 # Reproduces the trained default model (never run in CI; ~80 min on this 2-core machine):
 # the synthetic dataset (200 drives x 24 frames, split by world seed), the camera-only and the

@@ -332,7 +332,8 @@ impl ModelDims {
         }
     }
 
-    /// The paper's shapes (D = 256, 800x450 images padded to 800x480, 15x25 features).
+    /// The paper's shapes (D = 256, 800x450 images padded to 800x480, 15x25 features, satellite
+    /// crop 400x200 at 0.15 m/px), as `satmap_ref.config` exports them.
     #[must_use]
     pub const fn paper_config() -> Self {
         Self {
@@ -344,6 +345,9 @@ impl ModelDims {
             image_scale: 0.5,
             feat_h: 15,
             feat_w: 25,
+            sat_h: 400,
+            sat_w: 200,
+            sat_gsd_m: 0.15,
             ..Self::test_config()
         }
     }

@@ -1,6 +1,7 @@
-//! Which runtime buffer lives in which region of `memory_layout.toml`, and whether a model's
-//! dimensions fit them: the one check between the generated capacities (a leaf,
-//! [`crate::capacity`]) and the types that size buffers from them.
+//! Which runtime buffer lives in which region of the memory layout (`memory_layout.toml`, or the
+//! `SATMAP_LAYOUT` file the build was generated from), and whether a model's dimensions fit
+//! them: the one check between the generated capacities (a leaf, [`crate::capacity`]) and the
+//! types that size buffers from them.
 
 use crate::capacity::{MAX_CAMERAS, layout};
 use crate::error::InitError;
@@ -14,55 +15,80 @@ const _: () = assert!(
         && layout::TILE_PIXELS_SHAPE[1] == layout::TILE_PIXELS_SHAPE[2]
 );
 
-/// Check that every runtime-owned region `dims` needs fits its capacity in `memory_layout.toml`.
+/// Runtime-owned regions whose size depends on the model's dimensions, in check order.
+pub const MODEL_REGIONS: [&str; 11] = [
+    "camera_images",
+    "value_features",
+    "gkt_lut",
+    "bev_query",
+    "gkt_weights",
+    "gathered",
+    "camera_bev",
+    "satellite_crop",
+    "satellite_bev",
+    "class_logits",
+    "points",
+];
+
+/// Bytes `dims` needs in each of [`MODEL_REGIONS`], as (region name, bytes), in that order.
+#[must_use]
+pub fn region_needs(dims: &ModelDims) -> [(&'static str, usize); 11] {
+    let f32s = |n: usize| n.saturating_mul(4);
+    let needs = [
+        MAX_CAMERAS.saturating_mul(dims.image_bytes()),
+        f32s(MAX_CAMERAS.saturating_mul(dims.value_len())),
+        crate::gkt::Lut::capacity_bytes(dims),
+        f32s(dims.bev_len()),
+        f32s(dims.weights_len()),
+        f32s(dims.bev_len()),
+        f32s(dims.bev_len()),
+        dims.crop_bytes(),
+        f32s(dims.bev_len()),
+        f32s(dims.logits_len()),
+        f32s(dims.points_len()),
+    ];
+    core::array::from_fn(|i| (MODEL_REGIONS[i], needs[i]))
+}
+
+/// Capacity of a model-dependent region in the layout this build was generated from.
+fn built_in_capacity(region: &str) -> Option<usize> {
+    Some(match region {
+        "camera_images" => layout::CAMERA_IMAGES_BYTES,
+        "value_features" => layout::VALUE_FEATURES_BYTES,
+        "gkt_lut" => layout::GKT_LUT_BYTES,
+        "bev_query" => layout::BEV_QUERY_BYTES,
+        "gkt_weights" => layout::GKT_WEIGHTS_BYTES,
+        "gathered" => layout::GATHERED_BYTES,
+        "camera_bev" => layout::CAMERA_BEV_BYTES,
+        "satellite_crop" => layout::SATELLITE_CROP_BYTES,
+        "satellite_bev" => layout::SATELLITE_BEV_BYTES,
+        "class_logits" => layout::CLASS_LOGITS_BYTES,
+        "points" => layout::POINTS_BYTES,
+        _ => return None,
+    })
+}
+
+/// Check that every runtime-owned region `dims` needs fits its capacity in the memory layout
+/// this build was generated from (`memory_layout.toml`, or the build's `SATMAP_LAYOUT` file).
 ///
 /// # Errors
 /// [`InitError::RegionTooSmall`] naming the first region that overflows, with the
 /// bytes the model needs and the region's capacity.
 pub fn check_regions(dims: &ModelDims) -> Result<(), InitError> {
-    let f32s = |n: usize| n.saturating_mul(4);
-    let regions: [(&'static str, usize, usize); 11] = [
-        (
-            "camera_images",
-            MAX_CAMERAS.saturating_mul(dims.image_bytes()),
-            layout::CAMERA_IMAGES_BYTES,
-        ),
-        (
-            "value_features",
-            f32s(MAX_CAMERAS.saturating_mul(dims.value_len())),
-            layout::VALUE_FEATURES_BYTES,
-        ),
-        (
-            "gkt_lut",
-            crate::gkt::Lut::capacity_bytes(dims),
-            layout::GKT_LUT_BYTES,
-        ),
-        ("bev_query", f32s(dims.bev_len()), layout::BEV_QUERY_BYTES),
-        (
-            "gkt_weights",
-            f32s(dims.weights_len()),
-            layout::GKT_WEIGHTS_BYTES,
-        ),
-        ("gathered", f32s(dims.bev_len()), layout::GATHERED_BYTES),
-        ("camera_bev", f32s(dims.bev_len()), layout::CAMERA_BEV_BYTES),
-        (
-            "satellite_crop",
-            dims.crop_bytes(),
-            layout::SATELLITE_CROP_BYTES,
-        ),
-        (
-            "satellite_bev",
-            f32s(dims.bev_len()),
-            layout::SATELLITE_BEV_BYTES,
-        ),
-        (
-            "class_logits",
-            f32s(dims.logits_len()),
-            layout::CLASS_LOGITS_BYTES,
-        ),
-        ("points", f32s(dims.points_len()), layout::POINTS_BYTES),
-    ];
-    for (region, needed_bytes, capacity_bytes) in regions {
+    check_regions_with(dims, built_in_capacity)
+}
+
+/// [`check_regions`] against other capacities, e.g. a layout file read at run time:
+/// `capacity(region)` gives a region's bytes, `None` (a region the layout lacks) counts as 0.
+///
+/// # Errors
+/// [`InitError::RegionTooSmall`] naming the first region that overflows.
+pub fn check_regions_with(
+    dims: &ModelDims,
+    capacity: impl Fn(&str) -> Option<usize>,
+) -> Result<(), InitError> {
+    for (region, needed_bytes) in region_needs(dims) {
+        let capacity_bytes = capacity(region).unwrap_or(0);
         if needed_bytes > capacity_bytes {
             return Err(InitError::RegionTooSmall {
                 region,

@@ -7,7 +7,7 @@ use satmap_layout::MemoryLayout;
 use crate::mutate::inputs;
 use crate::runner::Outcome::{Accepted, Refused};
 use crate::runner::{CaseResult, Input, assert_seeds_accepted, fuzz};
-use crate::seeds::MEMORY_LAYOUT_TOML;
+use crate::seeds::{MEMORY_LAYOUT_TOML, PAPER_LAYOUT_TOML};
 
 fn layout_case(input: &Input) -> CaseResult {
     let Ok(layout) = MemoryLayout::parse(&input.text()) else {
@@ -33,7 +33,10 @@ fn layout_case(input: &Input) -> CaseResult {
 
 #[test]
 fn memory_layout_never_panics() {
-    let seeds = vec![MEMORY_LAYOUT_TOML.as_bytes().to_vec()];
+    let seeds = vec![
+        MEMORY_LAYOUT_TOML.as_bytes().to_vec(),
+        PAPER_LAYOUT_TOML.as_bytes().to_vec(),
+    ];
     assert_seeds_accepted(&seeds, layout_case);
     fuzz("memory_layout", inputs(seeds, true), layout_case);
 }

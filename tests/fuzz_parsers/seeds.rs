@@ -1,7 +1,8 @@
 //! Seeds and fixtures shared by several harnesses: the committed bundle manifest, digest file,
-//! calibration and memory layout; the synthetic drive the product's writers turn into seeds
-//! (and its GeoJSON route); the model dims and calibration the later steps use; and the
-//! one-colour `BoxImagery`, crop and build options the route packs are built with.
+//! calibration and memory layouts (the default and `layouts/paper.toml`); the synthetic drive
+//! the product's writers turn into seeds (and its GeoJSON route); the model dims and
+//! calibration the later steps use; and the one-colour `BoxImagery`, crop and build options the
+//! route packs are built with.
 
 use std::sync::OnceLock;
 
@@ -20,6 +21,7 @@ pub const MANIFEST_TOML: &str = include_str!("../../models/bundles/test/manifest
 pub const MANIFEST_SHA256: &str = include_str!("../../models/bundles/test/manifest.sha256");
 pub const CALIBRATION_TOML: &str = include_str!("../../models/calibration/nuscenes_like.toml");
 pub const MEMORY_LAYOUT_TOML: &str = include_str!("../../memory_layout.toml");
+pub const PAPER_LAYOUT_TOML: &str = include_str!("../../layouts/paper.toml");
 
 /// A 20-frame synthetic drive with tiny images, made once per test binary.
 pub fn seed_drive() -> &'static SyntheticDrive {

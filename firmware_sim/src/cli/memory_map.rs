@@ -1,16 +1,31 @@
-//! `satmap-sim memory-map`: print `memory_layout.toml` like a linker map: every region with its
-//! offset, bytes, owner, dtype and shape, the totals and the arena headroom; with `--bundle`,
-//! also what that bundle needs in each region.
+//! `satmap-sim memory-map`: print the memory layout this binary was built with
+//! (`memory_layout.toml`, or the build's `SATMAP_LAYOUT` file) like a linker map: every region
+//! with its offset, bytes, owner, dtype and shape, the totals and the arena headroom; with
+//! `--bundle`, also whether that bundle's buffers fit the layout's regions.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use satmap_layout::MemoryLayout;
+use satmap_runtime::InitError;
 use satmap_runtime::bundle::Bundle;
-use satmap_runtime::regions::check_regions;
+use satmap_runtime::capacity::layout;
+use satmap_runtime::regions::check_regions_with;
 
-/// The layout this binary was built with.
-pub const BUILT_IN_LAYOUT: &str = include_str!("../../../memory_layout.toml");
+use crate::cli::drive::BadArgument;
+
+/// The layout this binary was built with (the text of [`layout::SOURCE_PATH`]).
+pub const BUILT_IN_LAYOUT: &str = layout::SOURCE_TOML;
+
+/// One line naming the layout built into this binary: its file and the config it is sized for.
+#[must_use]
+pub fn built_in_layout_line() -> String {
+    format!(
+        "built-in layout {} (sized for `{}`)",
+        layout::SOURCE_PATH,
+        layout::SIZED_FOR
+    )
+}
 
 /// Arguments of `memory-map`.
 #[derive(clap::Args, Debug)]
@@ -18,7 +33,7 @@ pub struct Args {
     /// Layout file (default: the one this binary was built with).
     #[arg(long)]
     pub layout: Option<PathBuf>,
-    /// Also check that this bundle's buffers fit the built-in layout's regions.
+    /// Also check that this bundle's buffers fit the printed layout's regions.
     #[arg(long)]
     pub bundle: Option<PathBuf>,
 }
@@ -32,17 +47,52 @@ pub fn run(args: &Args) -> Result<()> {
         Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
         None => BUILT_IN_LAYOUT.to_owned(),
     };
-    let layout = MemoryLayout::parse(&text).with_context(|| match &args.layout {
+    let map = MemoryLayout::parse(&text).with_context(|| match &args.layout {
         Some(p) => p.display().to_string(),
-        None => "built-in memory_layout.toml".to_owned(),
+        None => format!("built-in layout {}", layout::SOURCE_PATH),
     })?;
-    print!("{}", layout.render_map());
+    match &args.layout {
+        Some(p) => println!("layout {} ({})", p.display(), built_in_layout_line()),
+        None => println!("{}", built_in_layout_line()),
+    }
+    print!("{}", map.render_map());
     if let Some(dir) = &args.bundle {
         // Bundle errors name the file that failed; a context would print the folder twice.
         let bundle = Bundle::open(dir)?;
-        check_regions(bundle.dims())
-            .map_err(crate::harness::HarnessError::from)
-            .with_context(|| format!("bundle {}", dir.display()))?;
+        let fits = check_regions_with(bundle.dims(), |name| map.region(name).map(|r| r.bytes));
+        match (fits, &args.layout) {
+            (Ok(()), _) => {}
+            // The built-in layout: the harness's message, which names it.
+            (Err(e), None) => {
+                return Err(crate::harness::HarnessError::from(e))
+                    .with_context(|| format!("bundle {}", dir.display()));
+            }
+            (
+                Err(InitError::RegionTooSmall {
+                    region,
+                    needed_bytes,
+                    capacity_bytes,
+                }),
+                Some(p),
+            ) => {
+                // Bad input (exit 2), as the harness's region error is.
+                return Err(BadArgument(format!(
+                    "bundle {}: region `{region}` does not fit: needs {needed_bytes} bytes, \
+                     layout {} gives {capacity_bytes}",
+                    dir.display(),
+                    p.display()
+                ))
+                .into());
+            }
+            (Err(e), Some(p)) => {
+                return Err(BadArgument(format!(
+                    "bundle {}: {e} ({})",
+                    dir.display(),
+                    p.display()
+                ))
+                .into());
+            }
+        }
         println!("bundle {}: every region fits", dir.display());
     }
     Ok(())

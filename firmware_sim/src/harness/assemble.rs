@@ -105,6 +105,8 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
     let mut report = Report {
         bundle: m.cfg.bundle_dir.display().to_string(),
         config: bundle_config_name(&m.cfg.bundle_dir),
+        layout: layout::SOURCE_PATH.to_owned(),
+        layout_sized_for: layout::SIZED_FOR.to_owned(),
         scenario,
         frames: m.frames,
         rate_hz: m.cfg.rate_hz,

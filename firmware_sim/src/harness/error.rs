@@ -26,8 +26,11 @@ pub enum HarnessError {
     },
     /// A buffer of the model or the route pack does not fit its region of the memory map.
     #[error(
-        "region `{region}` does not fit: needs {needed_bytes} bytes, memory_layout.toml gives \
-         {capacity_bytes}"
+        "region `{region}` does not fit: needs {needed_bytes} bytes, the memory layout built in \
+         ({}, sized for `{}`) gives {capacity_bytes} (a variant's layout is chosen at build \
+         time: SATMAP_LAYOUT=layouts/<config>.toml)",
+        satmap_runtime::capacity::layout::SOURCE_PATH,
+        satmap_runtime::capacity::layout::SIZED_FOR
     )]
     RegionTooSmall {
         /// Region name.

@@ -113,6 +113,11 @@ pub struct Report {
     pub bundle: String,
     /// Model config of the bundle.
     pub config: String,
+    /// The memory layout file built into this binary (`memory_layout.toml`, or the build's
+    /// `SATMAP_LAYOUT`), workspace-relative as given.
+    pub layout: String,
+    /// The model config that layout is sized for (`sized_for`).
+    pub layout_sized_for: String,
     /// What was replayed.
     pub scenario: String,
     /// Steps run.
@@ -262,6 +267,11 @@ impl Report {
             self.frames, self.scenario
         );
         let _ = writeln!(s, "bundle {} (config `{}`)", self.bundle, self.config);
+        let _ = writeln!(
+            s,
+            "memory layout {} (sized for `{}`)",
+            self.layout, self.layout_sized_for
+        );
         let _ = writeln!(
             s,
             "virtual clock {:.3} Hz (step period {:.1} ms); budgets for: {}",
