@@ -526,6 +526,7 @@ fn every_camera_dropped_in_turn_matches_the_reference() {
         ] {
             let want = dropout.f32s(&format!("{name}_{stage}"));
             let d = common::max_abs_diff(got, &want);
+            println!("dropout {name} {stage}: max abs diff {d:.2e}");
             assert!(d <= tol, "{name} {stage}: max abs diff {d} > {tol}");
         }
         // The health word names exactly the cameras left out.
