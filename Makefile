@@ -78,12 +78,15 @@ $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # tests/c_api.rs; every CRC check and every bit flip of a frame caught), then the first two
 # frames again under valgrind (any memory error or leak fails; see replay.c on why digests are
 # not compared there).
-CAPI_LIB := target/debug/libsatmap_capi.a
+# The static library `cargo test` builds for the workspace (crate-type staticlib): the same
+# command as test-rust, so nothing is rebuilt; `cargo build -p satmap-capi` alone would unify
+# other dependency features and recompile tract (~7 min).
+CAPI_LIB := target/debug/deps/libsatmap_capi.a
 C_REPLAY := target/c/replay
 C_REPLAY_ARGS := models/bundles/test models/calibration/nuscenes_like.toml examples/c/scenario.bin \
   examples/c/expected.txt
 test-c:
-	$(CARGO) build --profile test -p satmap-capi
+	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
 	mkdir -p target/c
 	$(CC) -std=c11 -Wall -Wextra -Werror -g -O1 -I runtime/capi/include examples/c/replay.c \
 	  $(CAPI_LIB) -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o $(C_REPLAY)
