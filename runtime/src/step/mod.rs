@@ -75,10 +75,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         satellite: S,
         limits: FrameLimits,
     ) -> Result<Self, InitError> {
-        limits.validate()?;
-        let dims = engine.dims().clone();
-        dims.validate()?;
-        crate::regions::check_regions(&dims)?;
+        let dims = checked_dims(&engine, &limits)?;
         let lut = Lut::new(&dims, calibration)?;
         let buffers = StepBuffers::new(&dims)?;
         Ok(Self::assemble(
@@ -101,10 +98,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         limits: FrameLimits,
         regions: RuntimeRegions,
     ) -> Result<Self, InitError> {
-        limits.validate()?;
-        let dims = engine.dims().clone();
-        dims.validate()?;
-        crate::regions::check_regions(&dims)?;
+        let dims = checked_dims(&engine, &limits)?;
         let (step, lut) = regions.split(&dims)?;
         let lut = Lut::placed(&dims, calibration, lut.queries, lut.indices, lut.count)?;
         let buffers = StepBuffers::placed(step);
@@ -478,6 +472,16 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     pub fn points(&self) -> &[f32] {
         self.buffers.points()
     }
+}
+
+/// The checks both constructors make before any buffer exists: the limits, the engine's
+/// dimensions and whether they fit the layout's regions.
+fn checked_dims<E: Engine>(engine: &E, limits: &FrameLimits) -> Result<ModelDims, InitError> {
+    limits.validate()?;
+    let dims = engine.dims().clone();
+    dims.validate()?;
+    crate::regions::check_regions(&dims)?;
+    Ok(dims)
 }
 
 #[cfg(test)]
