@@ -50,7 +50,7 @@ venv: $(PY_VENV)/.installed
 
 $(PY_VENV)/.installed: models/pyproject.toml
 	python3 -m venv $(PY_VENV)
-	$(PY_VENV)/bin/pip install --quiet --disable-pip-version-check -e 'models[test]'
+	$(PY_VENV)/bin/pip install --quiet --disable-pip-version-check --no-cache-dir -e 'models[test]'
 	touch $@
 
 test-python: venv
@@ -62,12 +62,16 @@ test-python: venv
 # without it rebuilds them back) and drive PAPER_FRAMES frames through SatMap in the arena; fails
 # when the drive does (a region too small, the arena exhausted, a budget exceeded). In `test`
 # after test-rust, so CI builds both layouts. See README "Memory layout per product variant".
+# The binary comes from the same `cargo test --workspace` command as test-rust (an integration
+# test of satmap-sim makes cargo build it): `cargo run -p satmap-sim` would resolve dependency
+# features for that one package and recompile tract (~8 min of CI).
 PAPER_BUNDLE := models/build/paper
 PAPER_FRAMES ?= 2
 SATMAP_PY_SOURCES := $(shell find models/src/satmap_ref -name '*.py')
 test-paper: $(PAPER_BUNDLE)/manifest.sha256
-	SATMAP_LAYOUT=layouts/paper.toml $(CARGO) run --profile test -p satmap-sim -- drive \
-	  --bundle $(PAPER_BUNDLE) --frames $(PAPER_FRAMES) --quiet
+	SATMAP_LAYOUT=layouts/paper.toml $(CARGO) test --workspace --exclude satmap-nostd-check \
+	  --no-run --test cli_refusals
+	target/debug/satmap-sim drive --bundle $(PAPER_BUNDLE) --frames $(PAPER_FRAMES) --quiet
 
 $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 	cd models && .venv/bin/python -m satmap_ref.export --config paper --out build/paper
