@@ -87,7 +87,7 @@ $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # other dependency features and recompile tract (~7 min).
 CAPI_LIB := target/debug/deps/libsatmap_capi.a
 C_REPLAY := target/c/replay
-C_REPLAY_ARGS := models/bundles/test models/calibration/nuscenes_like.toml examples/c/scenario.bin \
+C_REPLAY_ARGS := models/bundles/test.satmap models/calibration/nuscenes_like.toml examples/c/scenario.bin \
   examples/c/expected.txt
 test-c:
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run

@@ -9,7 +9,7 @@ mod common;
 use std::ffi::CString;
 use std::path::PathBuf;
 
-use common::{GoldenFrame, bundle_dir, calibration, engine, root};
+use common::{GoldenFrame, calibration, engine, root};
 use satmap_capi::{
     SATMAP_DEFAULT_DATA_ID, SATMAP_MAX_WIRE_BYTES, SATMAP_REGION_COUNT, SatmapCameraImage,
     SatmapFrame, SatmapRegion, SatmapRegionInfo, SatmapRuntime, SatmapSliceInfo, SatmapStatus,
@@ -380,7 +380,8 @@ fn the_c_api_computes_the_rust_run_and_protects_its_output() {
             }
         })
         .collect();
-    let bundle = CString::new(bundle_dir().to_str().unwrap()).unwrap();
+    // The compiled bundle, as an ECU loads it (bit-identical to the folder: compiled_bundle.rs).
+    let bundle = CString::new(root().join("models/bundles/test.satmap").to_str().unwrap()).unwrap();
     let cal = CString::new(
         root()
             .join("models/calibration/nuscenes_like.toml")

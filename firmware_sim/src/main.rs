@@ -40,6 +40,8 @@ enum Command {
     MemoryMap(satmap_sim::cli::memory_map::Args),
     /// Run every stage of bundles in tract and compare with their onnxruntime reference outputs.
     CheckBundle(satmap_sim::cli::check_bundle::Args),
+    /// Compile a folder bundle (ONNX stages) into the one-file NNEF bundle the ECU engine loads.
+    Compile(satmap_sim::cli::compile::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -55,6 +57,7 @@ fn main() -> std::process::ExitCode {
         }
         Command::MemoryMap(args) => satmap_sim::cli::memory_map::run(&args),
         Command::CheckBundle(args) => satmap_sim::cli::check_bundle::run(&args),
+        Command::Compile(args) => satmap_sim::cli::compile::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -30,8 +30,8 @@ use satmap_runtime::satellite::CropSpec;
 /// Arguments of `drive`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Bundle folder.
-    #[arg(long, default_value = "models/bundles/test")]
+    /// Bundle: a compiled bundle file (the default, the ECU's form) or a folder of ONNX stages.
+    #[arg(long, default_value = "models/bundles/test.satmap")]
     pub bundle: PathBuf,
     /// Scenario folder to replay instead of a synthetic drive.
     #[arg(long)]

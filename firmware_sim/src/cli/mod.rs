@@ -2,6 +2,7 @@
 
 pub mod build_pack;
 pub mod check_bundle;
+pub mod compile;
 pub mod drive;
 pub mod evaluate;
 pub mod export_dataset;

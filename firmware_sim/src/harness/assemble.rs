@@ -142,9 +142,15 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
 
 /// The `[model] config` name of a bundle's manifest (`test`, `nano`, `paper`), or `?`.
 #[must_use]
-pub fn bundle_config_name(dir: &Path) -> String {
-    std::fs::read_to_string(dir.join("manifest.toml"))
-        .ok()
+pub fn bundle_config_name(path: &Path) -> String {
+    let manifest = if path.is_file() {
+        satmap_runtime::bundle::Bundle::open(path)
+            .ok()
+            .and_then(|b| String::from_utf8(b.manifest_bytes().to_vec()).ok())
+    } else {
+        std::fs::read_to_string(path.join("manifest.toml")).ok()
+    };
+    manifest
         .and_then(|t| t.parse::<toml::Table>().ok())
         .and_then(|t| Some(t.get("model")?.get("config")?.as_str()?.to_owned()))
         .unwrap_or_else(|| "?".to_owned())

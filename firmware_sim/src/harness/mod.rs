@@ -73,7 +73,7 @@ pub enum ScenarioInput {
 /// Settings of a replay.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReplayConfig {
-    /// Bundle folder.
+    /// Bundle: a compiled bundle file or a folder (see `satmap_runtime::bundle`).
     pub bundle_dir: PathBuf,
     /// What to replay.
     pub scenario: ScenarioInput,

@@ -175,8 +175,9 @@ extern "C" {
 // `info` is NULL or valid for a write.
 enum SatmapStatus satmap_region_info(size_t id, struct SatmapRegionInfo *info);
 
-// Create a runtime over the caller's regions: load and verify the bundle directory, read the
-// calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
+// Create a runtime over the caller's regions: load and verify the bundle (a compiled `.satmap`
+// file; a folder of ONNX stages only where the library was built with the host's `onnx`
+// feature), read the calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
 // `SATMAP_REGION_COUNT` entries in region id order; each must stay valid and untouched until
 // `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
 //
@@ -185,7 +186,7 @@ enum SatmapStatus satmap_region_info(size_t id, struct SatmapRegionInfo *info);
 // NUL-terminated; `out` is valid for a write.
 enum SatmapStatus satmap_create(const struct SatmapRegion *regions,
                                 size_t region_count,
-                                const char *bundle_dir,
+                                const char *bundle_path,
                                 const char *calibration_toml,
                                 struct SatmapRuntime **out);
 

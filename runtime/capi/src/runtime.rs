@@ -117,8 +117,9 @@ fn path_of<'a>(p: *const c_char) -> Result<&'a Path, SatmapStatus> {
         .map_err(|_| SatmapStatus::InvalidArgument)
 }
 
-/// Create a runtime over the caller's regions: load and verify the bundle directory, read the
-/// calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
+/// Create a runtime over the caller's regions: load and verify the bundle (a compiled `.satmap`
+/// file; a folder of ONNX stages only where the library was built with the host's `onnx`
+/// feature), read the calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
 /// `SATMAP_REGION_COUNT` entries in region id order; each must stay valid and untouched until
 /// `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
 ///
@@ -129,7 +130,7 @@ fn path_of<'a>(p: *const c_char) -> Result<&'a Path, SatmapStatus> {
 pub unsafe extern "C" fn satmap_create(
     regions: *const SatmapRegion,
     region_count: usize,
-    bundle_dir: *const c_char,
+    bundle_path: *const c_char,
     calibration_toml: *const c_char,
     out: *mut *mut SatmapRuntime,
 ) -> SatmapStatus {
@@ -150,7 +151,7 @@ pub unsafe extern "C" fn satmap_create(
         if given.iter().any(|r| r.data.is_null()) {
             return SatmapStatus::NullArgument;
         }
-        let (bundle, calibration) = match (path_of(bundle_dir), path_of(calibration_toml)) {
+        let (bundle, calibration) = match (path_of(bundle_path), path_of(calibration_toml)) {
             (Ok(b), Ok(c)) => (b, c),
             (Err(e), _) | (_, Err(e)) => return e,
         };

@@ -46,12 +46,23 @@ pub struct StageEntry {
     pub outputs: Vec<TensorSpec>,
 }
 
+/// Where a compiled bundle came from: its manifest's `[compiled]` table (absent in a folder's).
+#[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompiledFrom {
+    /// Digest of the folder bundle it was compiled from (its `manifest.sha256`).
+    pub source_digest: String,
+}
+
 /// The whole manifest.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
     /// Model dimensions and configuration.
     pub model: ModelDims,
+    /// Provenance, in a compiled bundle only.
+    #[serde(default)]
+    pub compiled: Option<CompiledFrom>,
     /// The stages.
     #[serde(rename = "stage")]
     pub stages: Vec<StageEntry>,

@@ -1,5 +1,7 @@
-//! Bundles: a folder with `manifest.toml`, its digest `manifest.sha256` and the compiled stage
-//! files (std only).
+//! Bundles, in two forms (std only): a folder with `manifest.toml`, its digest `manifest.sha256`
+//! and one ONNX file per stage (what `satmap_ref.export` writes, run by the host tools), and the
+//! compiled bundle the ECU loads, one archive of the same manifest and one NNEF graph per stage
+//! ([`archive`], written by [`compile`]).
 //!
 //! The manifest (format in `ARCHITECTURE.md`) carries the model dimensions and, per stage, the
 //! file, its SHA-256 and its input/output names, shapes and dtypes. A bundle is one verified
@@ -10,14 +12,18 @@
 //! parses the bytes [`Bundle::read_stage`] verified, never a path read again after hashing.
 //! Anything that does not fit fails here with an error naming the file, stage and tensor.
 
+pub mod archive;
+#[cfg(feature = "onnx")]
+pub mod compile;
 mod digest;
 mod manifest;
 mod model_table;
 
 pub use digest::{DigestParseError, Sha256Digest};
-pub use manifest::{DType, Manifest, StageEntry, TensorSpec};
+pub use manifest::{CompiledFrom, DType, Manifest, StageEntry, TensorSpec};
 pub use model_table::ModelTable;
 
+use std::borrow::Cow;
 use std::path::{Component, Path, PathBuf};
 
 use crate::engine::Stage;
@@ -50,6 +56,16 @@ pub enum BundleError {
         /// Digest in `manifest.sha256`.
         recorded: Sha256Digest,
         /// Digest of the manifest's bytes.
+        actual: Sha256Digest,
+    },
+    /// A compiled bundle's bytes differ from the whole-file digest it carries.
+    #[error("{path}: the archive has sha256 {actual}, its bundle.sha256 says {recorded}")]
+    ArchiveDigest {
+        /// The compiled bundle.
+        path: PathBuf,
+        /// Digest in the `bundle.sha256` entry.
+        recorded: Sha256Digest,
+        /// Digest of the archive's bytes before that entry.
         actual: Sha256Digest,
     },
     /// The bundle is not the one the integrator pinned.
@@ -134,6 +150,23 @@ pub enum BundleError {
         /// What the runtime expects.
         expected: String,
     },
+    /// A compiled bundle that is not a tar archive of the expected entries in canonical form.
+    #[error("compiled bundle: {message}")]
+    Archive {
+        /// What is wrong, with the entry or byte offset.
+        message: String,
+    },
+    /// The bundle's graph format is one this build's engine does not load (an ONNX folder
+    /// without the `onnx` feature).
+    #[error("{path}: {format} bundles need {needs}")]
+    Format {
+        /// The bundle.
+        path: PathBuf,
+        /// The bundle's graph format.
+        format: GraphFormat,
+        /// What would load it.
+        needs: &'static str,
+    },
     /// The graph engine refused a stage.
     #[error("stage `{stage}`: graph engine error: {message}")]
     Engine {
@@ -150,23 +183,53 @@ pub const MANIFEST_FILE: &str = "manifest.toml";
 /// File name of the manifest's digest inside a bundle folder.
 pub const DIGEST_FILE: &str = "manifest.sha256";
 
-/// A verified bundle on disk: its folder, digest, manifest and the checked interface and hash of
-/// every stage.
+/// The graph format of a bundle's stages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GraphFormat {
+    /// ONNX files in a folder (the export's output; needs the `onnx` feature to run).
+    Onnx,
+    /// NNEF tars inside a compiled bundle archive (what the ECU engine loads).
+    Nnef,
+}
+
+impl std::fmt::Display for GraphFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Onnx => "ONNX",
+            Self::Nnef => "NNEF",
+        })
+    }
+}
+
+/// Where the verified stage bytes come from.
+#[derive(Clone, Debug)]
+enum Source {
+    /// A folder: each stage file is read again, and checked again, when the engine asks.
+    Dir,
+    /// A compiled bundle, held in memory whole after its checks.
+    Archive(Box<archive::Archive>),
+}
+
+/// A verified bundle: its path, digest, manifest and the checked interface and hash of every
+/// stage.
 #[derive(Clone, Debug)]
 pub struct Bundle {
-    dir: PathBuf,
+    path: PathBuf,
+    source: Source,
     digest: Sha256Digest,
     manifest: Manifest,
+    manifest_bytes: Vec<u8>,
     stage_digests: [Sha256Digest; Stage::ALL.len()],
 }
 
 impl Bundle {
-    /// Open and verify the bundle in `dir` (see the module doc for every check).
+    /// Open and verify the bundle at `path`: a compiled bundle file or a bundle folder (see the
+    /// module doc for every check).
     ///
     /// # Errors
     /// The first check that fails, as a [`BundleError`] naming the file and stage.
-    pub fn open(dir: impl AsRef<Path>) -> Result<Self, BundleError> {
-        Self::open_checked(dir.as_ref(), None)
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, BundleError> {
+        Self::open_checked(path.as_ref(), None)
     }
 
     /// [`Bundle::open`], and refuse any bundle whose digest is not `pinned`: the integrator's
@@ -174,11 +237,55 @@ impl Bundle {
     ///
     /// # Errors
     /// [`BundleError::NotPinned`] for another bundle, else as [`Bundle::open`].
-    pub fn open_pinned(dir: impl AsRef<Path>, pinned: Sha256Digest) -> Result<Self, BundleError> {
-        Self::open_checked(dir.as_ref(), Some(pinned))
+    pub fn open_pinned(path: impl AsRef<Path>, pinned: Sha256Digest) -> Result<Self, BundleError> {
+        Self::open_checked(path.as_ref(), Some(pinned))
     }
 
-    fn open_checked(dir: &Path, pinned: Option<Sha256Digest>) -> Result<Self, BundleError> {
+    /// Verify the bytes of a compiled bundle (read by the caller, e.g. from flash) and keep
+    /// them; `path` only names it in errors.
+    ///
+    /// # Errors
+    /// As [`Bundle::open`].
+    pub fn from_archive_bytes(
+        path: impl Into<PathBuf>,
+        bytes: Vec<u8>,
+        pinned: Option<Sha256Digest>,
+    ) -> Result<Self, BundleError> {
+        let path = path.into();
+        let archive = archive::Archive::parse(&path, bytes)?;
+        if let Some(pinned) = pinned
+            && pinned != archive.digest
+        {
+            return Err(BundleError::NotPinned {
+                dir: path,
+                pinned,
+                actual: archive.digest,
+            });
+        }
+        let stage_digests = Stage::ALL.map(|stage| {
+            let range = archive.stages[stage as usize].clone();
+            Sha256Digest::of(&archive.bytes[range])
+        });
+        Ok(Self {
+            path,
+            digest: archive.digest,
+            manifest: archive.manifest.clone(),
+            manifest_bytes: archive.bytes[archive.manifest_at.clone()].to_vec(),
+            stage_digests,
+            source: Source::Archive(Box::new(archive)),
+        })
+    }
+
+    fn open_checked(path: &Path, pinned: Option<Sha256Digest>) -> Result<Self, BundleError> {
+        if path.is_file() {
+            let bytes = read(path)?;
+            Self::from_archive_bytes(path, bytes, pinned)
+        } else {
+            Self::open_dir(path, pinned)
+        }
+    }
+
+    fn open_dir(dir: &Path, pinned: Option<Sha256Digest>) -> Result<Self, BundleError> {
         let dir = dir.to_path_buf();
         let path = dir.join(MANIFEST_FILE);
         let bytes = read(&path)?;
@@ -232,20 +339,32 @@ impl Bundle {
             *slot = expected;
         }
         Ok(Self {
-            dir,
+            path: dir,
+            source: Source::Dir,
             digest,
             manifest,
+            manifest_bytes: bytes,
             stage_digests,
         })
     }
 
-    /// The bundle's folder.
+    /// The bundle's path: its folder, or the compiled bundle's file.
     #[must_use]
-    pub fn dir(&self) -> &Path {
-        &self.dir
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
-    /// The bundle digest (SHA-256 of `manifest.toml`), the one value an integrator pins.
+    /// The graph format of the stages.
+    #[must_use]
+    pub const fn format(&self) -> GraphFormat {
+        match self.source {
+            Source::Dir => GraphFormat::Onnx,
+            Source::Archive(_) => GraphFormat::Nnef,
+        }
+    }
+
+    /// The bundle digest, the one value an integrator pins: the SHA-256 of `manifest.toml` for a
+    /// folder, of the archive before its digest entry for a compiled bundle.
     #[must_use]
     pub const fn digest(&self) -> Sha256Digest {
         self.digest
@@ -257,26 +376,53 @@ impl Bundle {
         &self.manifest
     }
 
+    /// The bytes of `manifest.toml`, as verified.
+    #[must_use]
+    pub fn manifest_bytes(&self) -> &[u8] {
+        &self.manifest_bytes
+    }
+
     /// The model dimensions.
     #[must_use]
     pub fn dims(&self) -> &ModelDims {
         &self.manifest.model
     }
 
-    /// Path of a stage's graph file (for tools; the engine loads [`Bundle::read_stage`]).
+    /// Path of a stage's graph file in a folder bundle (for tools; the engine loads
+    /// [`Bundle::read_stage`]); for a compiled bundle, its entry name inside the archive.
     pub fn stage_path(&self, stage: Stage) -> Result<PathBuf, BundleError> {
-        stage_file(&self.dir, stage, &self.manifest.stage(stage)?.file)
+        let file = &self.manifest.stage(stage)?.file;
+        match self.source {
+            Source::Dir => stage_file(&self.path, stage, file),
+            Source::Archive(_) => Ok(self.path.join(file)),
+        }
     }
 
-    /// The bytes of `stage`'s graph, read once and checked against the manifest's SHA-256: what
-    /// the engine parses, so a file changed after [`Bundle::open`] is refused, not loaded.
+    /// The bytes of `stage`'s graph, checked against the manifest's SHA-256: what the engine
+    /// parses. A folder's file is read again and checked again, so a file changed after
+    /// [`Bundle::open`] is refused, not loaded; a compiled bundle's bytes are the ones verified
+    /// in memory.
     ///
     /// # Errors
     /// [`BundleError::Io`] or [`BundleError::Checksum`] naming the stage and file.
-    pub fn read_stage(&self, stage: Stage) -> Result<Vec<u8>, BundleError> {
-        let file = self.stage_path(stage)?;
-        let bytes = read(&file)?;
-        verify(stage, file, bytes, self.stage_digests[stage as usize])
+    pub fn read_stage(&self, stage: Stage) -> Result<Cow<'_, [u8]>, BundleError> {
+        match &self.source {
+            Source::Dir => {
+                let file = self.stage_path(stage)?;
+                let bytes = read(&file)?;
+                verify(stage, file, bytes, self.stage_digests[stage as usize]).map(Cow::Owned)
+            }
+            Source::Archive(archive) => {
+                let range = archive.stages[stage as usize].clone();
+                Ok(Cow::Borrowed(&archive.bytes[range]))
+            }
+        }
+    }
+
+    /// The SHA-256 of `stage`'s graph bytes, as verified at open.
+    #[must_use]
+    pub fn stage_digest(&self, stage: Stage) -> Sha256Digest {
+        self.stage_digests[stage as usize]
     }
 }
 

@@ -1,9 +1,11 @@
 //! The tract graph engine: runs a bundle's stages over the runtime's fixed buffers (std only).
 //!
-//! Each stage is loaded once from the ONNX bytes the bundle verified (never re-read by path),
-//! its inputs and outputs bound by name, given its static input facts, optimised, turned into a
-//! plan, and given one reused state for the life of the engine (optimisation dominates load
-//! time, so the plan is never rebuilt). Inputs are held in reference-counted tensors that are
+//! Each stage is loaded once from the bytes the bundle verified (never re-read by path): the NNEF
+//! graph of a compiled bundle through tract-nnef and tract-core alone (the ECU build, feature
+//! `tract`), or, with the `onnx` feature, the ONNX file of a folder bundle through tract's ONNX
+//! front end, given its static input facts. Its inputs and outputs are bound by name, it is
+//! optimised, turned into a plan, and given one reused state for the life of the engine
+//! (optimisation dominates load time, so the plan is never rebuilt). Inputs are held in reference-counted tensors that are
 //! overwritten in place every run, so feeding a stage copies the runtime buffer into tract's
 //! memory once and allocates nothing on our side; tract's own intermediate tensors are the
 //! graph engine's allocations.
@@ -16,9 +18,10 @@
 
 use std::sync::Arc;
 
-use tract_onnx::prelude::*;
+use tract_nnef::framework::Nnef;
+use tract_nnef::prelude::*;
 
-use crate::bundle::{Bundle, BundleError, DType, TensorSpec};
+use crate::bundle::{Bundle, BundleError, DType, GraphFormat, StageEntry, TensorSpec};
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
@@ -33,32 +36,26 @@ struct StageRunner {
 }
 
 impl StageRunner {
-    fn load(bundle: &Bundle, stage: Stage) -> Result<Self, BundleError> {
+    fn load(bundle: &Bundle, nnef: &Nnef, stage: Stage) -> Result<Self, BundleError> {
         let entry = bundle.manifest().stage(stage)?;
         let bytes = bundle.read_stage(stage)?;
         let engine_err = engine_error(stage);
-        let mut model = tract_onnx::onnx()
-            .model_for_read(&mut bytes.as_slice())
-            .map_err(engine_err)?;
+        let model = match bundle.format() {
+            GraphFormat::Nnef => {
+                let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
+                check_io_names(stage, &graph_io_names(&model)?, entry)?;
+                model
+            }
+            GraphFormat::Onnx => onnx_model(stage, &bytes, entry)?,
+        };
         drop(bytes);
-        check_io_names(
-            stage,
-            &model,
-            entry.inputs.as_slice(),
-            entry.outputs.as_slice(),
-        )?;
-        for (ix, spec) in entry.inputs.iter().enumerate() {
-            model = model
-                .with_input_fact(ix, InferenceFact::dt_shape(datum(spec.dtype), &spec.shape))
-                .map_err(engine_err)?;
-        }
         let plan = model
             .into_optimized()
             .and_then(|m| m.into_runnable())
             .map_err(engine_err)?;
         check_graph_io(
             stage,
-            &plan,
+            plan.model(),
             entry.inputs.as_slice(),
             entry.outputs.as_slice(),
         )?;
@@ -175,7 +172,7 @@ pub const BACKEND_OUTPUT_COUNT: u32 = 5;
 /// Backend code: an output is not f32.
 pub const BACKEND_OUTPUT_DTYPE: u32 = 6;
 
-fn datum(dtype: DType) -> DatumType {
+pub(crate) fn datum(dtype: DType) -> DatumType {
     match dtype {
         DType::U8 => DatumType::U8,
         DType::I64 => DatumType::I64,
@@ -184,11 +181,66 @@ fn datum(dtype: DType) -> DatumType {
 }
 
 /// tract's error for `stage`, with its whole context chain.
-fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError + Copy {
+pub(crate) fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError + Copy {
     move |e| BundleError::Engine {
         stage: stage.name(),
         message: format!("{e:#}"),
     }
+}
+
+/// The typed model of an ONNX stage: parsed, names bound, static input facts from the manifest.
+#[cfg(feature = "onnx")]
+pub(crate) fn onnx_model(
+    stage: Stage,
+    bytes: &[u8],
+    entry: &StageEntry,
+) -> Result<TypedModel, BundleError> {
+    use tract_onnx::prelude::{Framework as _, InferenceFact, InferenceModelExt as _};
+    let engine_err = engine_error(stage);
+    let mut model = tract_onnx::onnx()
+        .model_for_read(&mut &bytes[..])
+        .map_err(engine_err)?;
+    check_io_names(stage, &graph_io_names(&model)?, entry)?;
+    for (ix, spec) in entry.inputs.iter().enumerate() {
+        model = model
+            .with_input_fact(ix, InferenceFact::dt_shape(datum(spec.dtype), &spec.shape))
+            .map_err(engine_err)?;
+    }
+    model.into_typed().map_err(engine_err)
+}
+
+/// Without the ONNX front end (the ECU build) a folder bundle is refused, not guessed at.
+#[cfg(not(feature = "onnx"))]
+fn onnx_model(stage: Stage, _: &[u8], _: &StageEntry) -> Result<TypedModel, BundleError> {
+    Err(BundleError::Format {
+        path: stage.name().into(),
+        format: GraphFormat::Onnx,
+        needs: "the `onnx` feature; compile them with `satmap-sim compile` for this engine",
+    })
+}
+
+/// The names of a graph's inputs (their source nodes) and outputs (their labels), in order.
+fn graph_io_names<F, O>(model: &Graph<F, O>) -> Result<(Vec<String>, Vec<String>), BundleError>
+where
+    F: Fact + Clone + 'static,
+    O: std::fmt::Debug + std::fmt::Display + AsRef<dyn Op> + AsMut<dyn Op> + Clone + 'static,
+{
+    let inputs = model
+        .inputs
+        .iter()
+        .map(|o| model.node(o.node).name.clone())
+        .collect();
+    let outputs = model
+        .outputs
+        .iter()
+        .map(|&o| {
+            model
+                .outlet_label(o)
+                .unwrap_or(model.node(o.node).name.as_str())
+                .to_owned()
+        })
+        .collect();
+    Ok((inputs, outputs))
 }
 
 /// Bind by name: the graph's inputs and outputs must carry the manifest's names in the
@@ -197,30 +249,12 @@ fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError + Copy {
 /// each buffer fed to the other's place.
 fn check_io_names(
     stage: Stage,
-    model: &InferenceModel,
-    inputs: &[TensorSpec],
-    outputs: &[TensorSpec],
+    (input_names, output_names): &(Vec<String>, Vec<String>),
+    entry: &StageEntry,
 ) -> Result<(), BundleError> {
-    let engine_err = engine_error(stage);
-    let input_names: Vec<&str> = model
-        .input_outlets()
-        .map_err(engine_err)?
-        .iter()
-        .map(|o| model.node(o.node).name.as_str())
-        .collect();
-    let output_names: Vec<&str> = model
-        .output_outlets()
-        .map_err(engine_err)?
-        .iter()
-        .map(|&o| {
-            model
-                .outlet_label(o)
-                .unwrap_or(model.node(o.node).name.as_str())
-        })
-        .collect();
     for (what, names, specs) in [
-        ("input", input_names, inputs),
-        ("output", output_names, outputs),
+        ("input", input_names, &entry.inputs),
+        ("output", output_names, &entry.outputs),
     ] {
         if names.len() != specs.len() {
             return Err(BundleError::Interface {
@@ -246,14 +280,13 @@ fn check_io_names(
     Ok(())
 }
 
-/// Check the optimised plan's input and output facts against the manifest.
-fn check_graph_io(
+/// Check a typed model's input and output facts against the manifest.
+pub(crate) fn check_graph_io(
     stage: Stage,
-    plan: &TypedSimplePlan,
+    model: &TypedModel,
     inputs: &[TensorSpec],
     outputs: &[TensorSpec],
 ) -> Result<(), BundleError> {
-    let model = plan.model();
     let check = |what: &'static str, facts: Vec<TractResult<&TypedFact>>, specs: &[TensorSpec]| {
         if facts.len() != specs.len() {
             return Err(BundleError::Interface {
@@ -312,9 +345,11 @@ impl core::fmt::Debug for TractEngine {
 impl TractEngine {
     /// Load, optimise and plan every stage of `bundle`.
     pub fn load(bundle: &Bundle) -> Result<Self, BundleError> {
+        // tract-core's operators only: a graph that needs another registry is refused at load.
+        let nnef = tract_nnef::nnef();
         let runners = Stage::ALL
             .iter()
-            .map(|&stage| StageRunner::load(bundle, stage))
+            .map(|&stage| StageRunner::load(bundle, &nnef, stage))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             dims: bundle.dims().clone(),
@@ -322,9 +357,9 @@ impl TractEngine {
         })
     }
 
-    /// Open the bundle in `dir` and load it.
-    pub fn open(dir: impl AsRef<std::path::Path>) -> Result<Self, BundleError> {
-        Self::load(&Bundle::open(dir)?)
+    /// Open the bundle at `path` (a compiled bundle file or a folder) and load it.
+    pub fn open(path: impl AsRef<std::path::Path>) -> Result<Self, BundleError> {
+        Self::load(&Bundle::open(path)?)
     }
 
     /// tract's message for the last failed run of `stage`, if any.

@@ -1,0 +1,351 @@
+//! The compiled bundle (`satmap-sim compile`, `bundle::compile`): the committed `test` folder
+//! bundle compiled to one NNEF archive steps bit-identically to the ONNX folder and within the
+//! goldens' tolerance; the committed `test.satmap` is current; a flipped byte, a graph whose
+//! inputs are swapped and a layout too small are refused; and the ECU build of the runtime
+//! carries no ONNX front end.
+
+mod common;
+
+use std::sync::OnceLock;
+
+use common::{GoldenFrame, bundle_dir, calibration, max_abs_diff};
+use satmap_layout::MemoryLayout;
+use satmap_runtime::InitError;
+use satmap_runtime::SatMap;
+use satmap_runtime::bundle::archive::write_archive;
+use satmap_runtime::bundle::compile::{CompileError, compile, stage_entry_name};
+use satmap_runtime::bundle::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Sha256Digest};
+use satmap_runtime::capacity::layout;
+use satmap_runtime::engine::Stage;
+use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::satellite::FixedCrop;
+
+/// The parity bound of `golden_step.rs`, against the onnxruntime reference.
+const STAGE_TOL: f32 = 1e-4;
+
+/// Region capacities of the layout this build was generated from.
+fn built_in_capacity() -> impl Fn(&str) -> Option<usize> {
+    let map = MemoryLayout::parse(layout::SOURCE_TOML).unwrap();
+    move |name| map.region(name).map(|r| r.bytes)
+}
+
+/// The `test` bundle compiled once per test process.
+fn compiled() -> &'static [u8] {
+    static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
+    BYTES.get_or_init(|| {
+        let source = Bundle::open(bundle_dir()).unwrap();
+        compile(&source, built_in_capacity()).unwrap().bytes
+    })
+}
+
+fn open_compiled(bytes: &[u8]) -> Result<Bundle, BundleError> {
+    Bundle::from_archive_bytes("test.satmap", bytes.to_vec(), None)
+}
+
+/// Every stage buffer after stepping each of the two golden frames through `bundle`.
+fn stage_buffers(bundle: &Bundle) -> Vec<(String, Vec<f32>, Vec<f32>)> {
+    let mut out = Vec::new();
+    for index in 0..2 {
+        let f = GoldenFrame::load(index);
+        let engine = TractEngine::load(bundle).unwrap();
+        let mut map = SatMap::new(engine, &calibration(), FixedCrop(&f.satellite)).unwrap();
+        let d = map.dims();
+        let (w, h) = (d.image_w as u32, d.image_h as u32);
+        map.step(&f.frame(1, w, h)).unwrap();
+        for (name, got) in [
+            ("value", map.value()),
+            ("bev_query", map.query()),
+            ("gkt_weights", map.weights()),
+            ("gathered", map.gathered()),
+            ("camera_bev", map.camera_bev()),
+            ("satellite_bev", map.satellite_bev()),
+            ("class_logits", map.logits()),
+            ("points", map.points()),
+        ] {
+            let golden = f.golden.f32s(name);
+            out.push((format!("frame {index} {name}"), got.to_vec(), golden));
+        }
+    }
+    out
+}
+
+/// The committed compiled `test` bundle, the default the demo and the C example load.
+fn committed() -> std::path::PathBuf {
+    common::root().join("models/bundles/test.satmap")
+}
+
+/// The compiled bundles compute what the ONNX folder computes: every stage buffer of both golden
+/// frames bit-identical (tract optimises the same decluttered graph either way), hence also
+/// within the reference's tolerance. Both the committed file and a fresh compile.
+#[test]
+fn compiled_bundles_step_bit_identically_to_the_onnx_folder() {
+    let folder = Bundle::open(bundle_dir()).unwrap();
+    assert_eq!(folder.format(), GraphFormat::Onnx);
+    let from_onnx = stage_buffers(&folder);
+    for (what, bundle) in [
+        ("committed", Bundle::open(committed()).unwrap()),
+        ("fresh", open_compiled(compiled()).unwrap()),
+    ] {
+        assert_eq!(bundle.format(), GraphFormat::Nnef);
+        let from_nnef = stage_buffers(&bundle);
+        for ((name, nnef, golden), (_, onnx, _)) in from_nnef.iter().zip(&from_onnx) {
+            let same = nnef
+                .iter()
+                .zip(onnx)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(
+                same,
+                "{what} {name}: NNEF and ONNX differ by {:e}",
+                max_abs_diff(nnef, onnx)
+            );
+            let d = max_abs_diff(nnef, golden);
+            println!("{what} {name}: compiled vs reference max abs diff {d:e}");
+            assert!(d <= STAGE_TOL, "{what} {name}: {d:e} > {STAGE_TOL:e}");
+        }
+    }
+}
+
+/// The committed compiled bundle was compiled from the committed folder as it is now (its
+/// `[compiled] source_digest`), with the folder's model and stage interfaces: re-run
+/// `satmap-sim compile --bundle models/bundles/test --out models/bundles/test.satmap` after a
+/// new export.
+#[test]
+fn the_committed_compiled_bundle_is_current() {
+    let folder = Bundle::open(bundle_dir()).unwrap();
+    let bundle = Bundle::open(committed()).unwrap();
+    let from = bundle.manifest().compiled.as_ref().unwrap();
+    assert_eq!(
+        from.source_digest,
+        folder.digest().to_string(),
+        "models/bundles/test.satmap is stale: compile it again from models/bundles/test"
+    );
+    assert!(folder.manifest().compiled.is_none());
+    assert_eq!(bundle.dims(), folder.dims());
+    for stage in Stage::ALL {
+        let (a, b) = (
+            bundle.manifest().stage(stage).unwrap(),
+            folder.manifest().stage(stage).unwrap(),
+        );
+        assert_eq!(
+            (&a.inputs, &a.outputs),
+            (&b.inputs, &b.outputs),
+            "{stage:?}"
+        );
+        assert_eq!(a.file, stage_entry_name(stage));
+    }
+}
+
+/// Positions to flip: every header byte, every manifest byte, the whole tail (digest entry,
+/// its padding, the end-of-archive blocks) and an even spread over the stage data.
+fn flip_positions(bytes: &[u8]) -> Vec<usize> {
+    let mut at = Vec::new();
+    let mut archive = tar::Archive::new(bytes);
+    let mut last_header = 0;
+    for (ix, entry) in archive.entries().unwrap().enumerate() {
+        let entry = entry.unwrap();
+        let header = entry.raw_header_position() as usize;
+        at.extend(header..header + 512);
+        if ix == 0 {
+            let data = entry.raw_file_position() as usize;
+            at.extend(data..data + entry.size() as usize);
+        }
+        last_header = header;
+    }
+    at.extend(last_header + 512..bytes.len());
+    let step = bytes.len() / 397;
+    at.extend((0..bytes.len()).step_by(step));
+    at.sort_unstable();
+    at.dedup();
+    at
+}
+
+/// One flipped byte anywhere (sampled as in [`flip_positions`]) is refused with an error, never
+/// loaded and never a panic.
+#[test]
+fn a_flipped_byte_is_refused() {
+    let original = compiled();
+    open_compiled(original).unwrap();
+    let positions = flip_positions(original);
+    let mut bytes = original.to_vec();
+    for &at in &positions {
+        bytes[at] ^= 0x20;
+        assert!(
+            open_compiled(&bytes).is_err(),
+            "byte {at} of {} flipped and the bundle opened",
+            bytes.len()
+        );
+        bytes[at] ^= 0x20;
+    }
+    println!(
+        "{} of {} byte positions flipped, each refused",
+        positions.len(),
+        original.len()
+    );
+    // Appended bytes are refused too (not a canonical archive).
+    let mut longer = original.to_vec();
+    longer.extend_from_slice(&[0; 512]);
+    assert!(matches!(
+        open_compiled(&longer),
+        Err(BundleError::Archive { .. })
+    ));
+}
+
+/// The entries of an archive, in order.
+fn entries_of(bytes: &[u8]) -> Vec<(String, Vec<u8>)> {
+    let mut archive = tar::Archive::new(bytes);
+    archive
+        .entries()
+        .unwrap()
+        .map(|e| {
+            let mut e = e.unwrap();
+            let name = e.path().unwrap().to_str().unwrap().to_owned();
+            let mut data = Vec::new();
+            std::io::Read::read_to_end(&mut e, &mut data).unwrap();
+            (name, data)
+        })
+        .collect()
+}
+
+/// `map_decoder` with its two same-shape inputs (`camera_bev`, `satellite_bev`) declared in the
+/// other order inside the NNEF graph, and the archive resealed with correct hashes: it opens,
+/// and the engine refuses it by name (positional binding would feed each to the other's place).
+#[test]
+fn a_graph_with_swapped_inputs_is_refused() {
+    let entries = entries_of(compiled());
+    let decoder_name = stage_entry_name(Stage::MapDecoder);
+    let (_, decoder) = entries.iter().find(|(n, _)| *n == decoder_name).unwrap();
+    let mut inner = Vec::new();
+    {
+        let mut builder = tar::Builder::new(&mut inner);
+        for (name, data) in entries_of(decoder) {
+            let data = if name == "graph.nnef" {
+                // tract takes the input order from the `external` declarations: swap those
+                // two lines, and the signature with them.
+                let text = String::from_utf8(data).unwrap();
+                let swaps = [
+                    (
+                        "graph network(camera_bev, satellite_bev)",
+                        "graph network(satellite_bev, camera_bev)",
+                    ),
+                    (
+                        "  camera_bev = external(shape = [80, 40, 32]);\n  satellite_bev = external(shape = [80, 40, 32]);\n",
+                        "  satellite_bev = external(shape = [80, 40, 32]);\n  camera_bev = external(shape = [80, 40, 32]);\n",
+                    ),
+                ];
+                swaps
+                    .iter()
+                    .fold(text, |text, (from, to)| {
+                        assert!(text.contains(from), "the graph no longer has `{from}`");
+                        text.replacen(from, to, 1)
+                    })
+                    .into_bytes()
+            } else {
+                data
+            };
+            let mut header = tar::Header::new_ustar();
+            header.set_path(&name).unwrap();
+            header.set_size(data.len() as u64);
+            header.set_mode(0o644);
+            header.set_cksum();
+            builder.append(&header, data.as_slice()).unwrap();
+        }
+        builder.finish().unwrap();
+    }
+    let manifest = String::from_utf8(entries[0].1.clone()).unwrap();
+    assert_eq!(entries[0].0, MANIFEST_FILE);
+    let manifest = manifest.replacen(
+        &Sha256Digest::of(decoder).to_string(),
+        &Sha256Digest::of(&inner).to_string(),
+        1,
+    );
+    let stages: Vec<(&str, &[u8])> = entries[1..=Stage::ALL.len()]
+        .iter()
+        .map(|(n, d)| {
+            let d: &[u8] = if *n == decoder_name { &inner } else { d };
+            (n.as_str(), d)
+        })
+        .collect();
+    let resealed = write_archive(manifest.as_bytes(), &stages).unwrap();
+    let bundle = open_compiled(&resealed).unwrap();
+    match TractEngine::load(&bundle) {
+        Err(BundleError::Interface {
+            stage,
+            what,
+            tensor,
+            found,
+            ..
+        }) => {
+            assert_eq!(
+                (stage, what, tensor.as_str()),
+                ("map_decoder", "input", "camera_bev")
+            );
+            assert!(found.contains("satellite_bev"), "{found}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// A layout whose `points` region is one byte short of the model's: refused before any stage is
+/// translated, naming the region.
+#[test]
+fn a_layout_too_small_is_refused_before_translation() {
+    let source = Bundle::open(bundle_dir()).unwrap();
+    let full = built_in_capacity();
+    let needed = satmap_runtime::regions::region_needs(source.dims())
+        .into_iter()
+        .find(|(r, _)| *r == "points")
+        .unwrap()
+        .1;
+    let short = |name: &str| {
+        if name == "points" {
+            Some(needed - 1)
+        } else {
+            full(name)
+        }
+    };
+    match compile(&source, short) {
+        Err(CompileError::Layout(InitError::RegionTooSmall { region, .. })) => {
+            assert_eq!(region, "points");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// The ECU build of the runtime (`--no-default-features --features tract`) reaches tract-core
+/// through tract-nnef and has no ONNX front end; the host build (`onnx`) does, so the check
+/// can fail.
+#[test]
+fn the_ecu_build_has_no_onnx_front_end() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let tree = |features: &str| {
+        let out = std::process::Command::new(&cargo)
+            .args([
+                "tree",
+                "--offline",
+                "-p",
+                "satmap-runtime",
+                "--no-default-features",
+            ])
+            .args(["--features", features, "-e", "normal", "--prefix", "none"])
+            .args(["--format", "{p}"])
+            .current_dir(common::root())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let has = |tree: &str, krate: &str| tree.lines().any(|l| l.starts_with(&format!("{krate} v")));
+    let ecu = tree("tract");
+    assert!(has(&ecu, "tract-nnef") && has(&ecu, "tract-core"), "{ecu}");
+    for front_end in ["tract-onnx", "tract-hir", "tract-onnx-opl", "prost"] {
+        assert!(
+            !has(&ecu, front_end),
+            "the ECU build pulls {front_end}:\n{ecu}"
+        );
+    }
+    assert!(has(&tree("onnx"), "tract-onnx"));
+}
