@@ -1,6 +1,6 @@
 //! The fuzz pass over every parser that takes outside bytes: route pack, its compressed tile
 //! payloads (through the JPEG and zlib decoders), bundle manifest (with
-//! its `manifest.sha256`), calibration TOML, `memory_layout.toml`, the scenario folder's files
+//! its `manifest.sha256`), the compiled bundle archive, calibration TOML, `memory_layout.toml`, the scenario folder's files
 //! (`scenario.toml`, `frame.toml`, `gt.json`), MapTR results / ground-truth JSON (all three
 //! layouts) and the GeoJSON route.
 //!
@@ -20,7 +20,7 @@
 //!
 //! `SATMAP_FUZZ_CASES` is the number of cases per parser (default 256, the CI slice);
 //! `SATMAP_FUZZ_SEED` the RNG seed (a number, or `random`; default fixed so CI repeats itself).
-//! `make fuzz` is the 1,200,000-input campaign (`ARCHITECTURE.md`, "Fuzzing"). Every parser
+//! `make fuzz` is the 1,350,000-input campaign (`ARCHITECTURE.md`, "Fuzzing"). Every parser
 //! prints one `fuzz <parser>: inputs run: N ... panics found: 0` line to stderr when it completes.
 //!
 //! Layout: `runner` (case count and seed, the `fuzz` loop, the summary line, the failure file),
@@ -28,6 +28,7 @@
 //! one module per parser, and here the regression tests of the findings.
 
 mod calibration;
+mod compiled_bundle;
 mod geojson_route;
 mod manifest;
 mod maptr_json;
