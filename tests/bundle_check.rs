@@ -28,6 +28,14 @@ fn test_bundle_matches_onnxruntime_in_tract() {
     }
 }
 
+/// `check-bundle models/bundles/test.satmap`: the compiled bundle against the folder's reference.
+#[test]
+fn compiled_test_bundle_matches_onnxruntime_in_tract() {
+    let compiled = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/bundles/test.satmap");
+    let worst = check_dir(&compiled).unwrap();
+    assert!(worst <= 1e-4, "{worst:e}");
+}
+
 /// A copy of the test bundle; `edit` is handed its reference's path.
 fn bundle_with_reference(name: &str, edit: impl FnOnce(&Path)) -> PathBuf {
     let dir =

@@ -19,7 +19,8 @@ use satmap_runtime::model_dims::ModelDims;
 /// Arguments of `check-bundle`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Bundle folders (each with manifest.toml and reference.safetensors).
+    /// Bundles: folders (each with manifest.toml and reference.safetensors), or compiled bundles
+    /// `<name>.satmap`, checked against `<name>/reference.safetensors`.
     #[arg(required = true)]
     pub bundles: Vec<PathBuf>,
     /// Largest allowed absolute difference between tract and onnxruntime.
@@ -151,7 +152,13 @@ pub fn check_dir(dir: &Path) -> Result<f32, CheckError> {
     };
     let started = std::time::Instant::now();
     let bundle = Bundle::open(dir).map_err(|e| bundle_error(&e))?;
-    let path = dir.join("reference.safetensors");
+    // A compiled bundle `<name>.satmap` is checked against the reference of the folder it was
+    // compiled from, `<name>/` beside it (the names `compile`'s README example uses).
+    let path = if dir.is_file() {
+        dir.with_extension("").join("reference.safetensors")
+    } else {
+        dir.join("reference.safetensors")
+    };
     let corrupt = |message: String| CheckError::ReferenceCorrupt {
         path: path.clone(),
         message,
