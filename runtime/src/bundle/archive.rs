@@ -18,7 +18,10 @@ use std::path::Path;
 
 use crate::engine::Stage;
 
-use super::{BundleError, MANIFEST_FILE, Manifest, Sha256Digest};
+use super::{
+    BundleError, MANIFEST_FILE, Manifest, Sha256Digest, checked_manifest, checked_stage_entry,
+    parse_digest_file, verify,
+};
 
 /// Entry name of the whole-file digest, the archive's last entry.
 pub const ARCHIVE_DIGEST_ENTRY: &str = "bundle.sha256";
@@ -34,12 +37,13 @@ const ENTRY_MTIME_S: u64 = 315_532_800;
 #[derive(Clone, Debug)]
 pub(super) struct Archive {
     pub bytes: Vec<u8>,
-    pub manifest: Manifest,
     /// Byte range of `manifest.toml` in `bytes`.
     pub manifest_at: Range<usize>,
     pub digest: Sha256Digest,
     /// Byte range of each stage entry in `bytes`, in [`Stage::ALL`] order.
     pub stages: [Range<usize>; Stage::ALL.len()],
+    /// The verified SHA-256 of each stage entry, in [`Stage::ALL`] order.
+    pub stage_digests: [Sha256Digest; Stage::ALL.len()],
 }
 
 /// One entry as the reader found it.
@@ -95,9 +99,9 @@ fn entries(bytes: &[u8]) -> Result<Vec<RawEntry>, BundleError> {
 }
 
 impl Archive {
-    /// Verify `bytes` as a compiled bundle (see the module doc); errors name entries as
-    /// `path/<entry>`.
-    pub fn parse(path: &Path, bytes: Vec<u8>) -> Result<Self, BundleError> {
+    /// Verify `bytes` as a compiled bundle (see the module doc) and return it with its parsed
+    /// manifest; errors name entries as `path/<entry>`.
+    pub fn parse(path: &Path, bytes: Vec<u8>) -> Result<(Self, Manifest), BundleError> {
         let entries = entries(&bytes)?;
         let expected_count = Stage::ALL.len() + 2;
         if entries.len() != expected_count {
@@ -115,46 +119,35 @@ impl Archive {
             )));
         }
         let manifest_bytes = &bytes[first[0].data.clone()];
-        let manifest =
-            Manifest::parse(manifest_bytes).map_err(|message| BundleError::Manifest {
-                path: path.join(MANIFEST_FILE),
-                message,
-            })?;
-        manifest.model.validate().map_err(|e| BundleError::Dims {
-            path: path.join(MANIFEST_FILE),
-            reason: e.to_string(),
-        })?;
-        manifest.check_stage_names()?;
+        let manifest = checked_manifest(&path.join(MANIFEST_FILE), manifest_bytes)?;
         if manifest.compiled.is_none() {
             return Err(archive_error(format!(
                 "{MANIFEST_FILE} has no [compiled] table (a folder's manifest)"
             )));
         }
         let mut stages: [Range<usize>; Stage::ALL.len()] = Default::default();
-        for ((slot, stage), raw) in stages.iter_mut().zip(Stage::ALL).zip(stage_entries) {
-            let entry = manifest.stage(stage)?;
-            entry.check_interface(stage, &manifest.model)?;
+        let mut stage_digests = [Sha256Digest::of(&[]); Stage::ALL.len()];
+        for (((range, digest), stage), raw) in stages
+            .iter_mut()
+            .zip(&mut stage_digests)
+            .zip(Stage::ALL)
+            .zip(stage_entries)
+        {
+            let (entry, expected) = checked_stage_entry(&manifest, stage)?;
             if raw.name != entry.file {
                 return Err(BundleError::StagePath {
                     stage: stage.name(),
                     file: raw.name.clone(),
                 });
             }
-            let expected =
-                Sha256Digest::parse(&entry.sha256).map_err(|reason| BundleError::StageDigest {
-                    stage: stage.name(),
-                    reason,
-                })?;
-            let actual = Sha256Digest::of(&bytes[raw.data.clone()]);
-            if actual != expected {
-                return Err(BundleError::Checksum {
-                    stage: stage.name(),
-                    file: path.join(&raw.name),
-                    expected,
-                    actual,
-                });
-            }
-            *slot = raw.data.clone();
+            verify(
+                stage,
+                &path.join(&raw.name),
+                &bytes[raw.data.clone()],
+                expected,
+            )?;
+            *range = raw.data.clone();
+            *digest = expected;
         }
         let last = &last[0];
         if last.name != ARCHIVE_DIGEST_ENTRY {
@@ -163,13 +156,8 @@ impl Archive {
                 last.name
             )));
         }
-        let recorded = std::str::from_utf8(&bytes[last.data.clone()])
-            .map_err(|e| super::DigestParseError::NotLowerHex(e.valid_up_to()))
-            .and_then(Sha256Digest::parse)
-            .map_err(|reason| BundleError::DigestFile {
-                path: path.join(ARCHIVE_DIGEST_ENTRY),
-                reason,
-            })?;
+        let recorded =
+            parse_digest_file(path.join(ARCHIVE_DIGEST_ENTRY), &bytes[last.data.clone()])?;
         let digest = Sha256Digest::of(&bytes[..last.header_at]);
         if digest != recorded {
             return Err(BundleError::ArchiveDigest {
@@ -195,13 +183,16 @@ impl Archive {
             )));
         }
         let manifest_at = first[0].data.clone();
-        Ok(Self {
-            bytes,
+        Ok((
+            Self {
+                bytes,
+                manifest_at,
+                digest,
+                stages,
+                stage_digests,
+            },
             manifest,
-            manifest_at,
-            digest,
-            stages,
-        })
+        ))
     }
 }
 

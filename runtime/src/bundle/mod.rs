@@ -252,7 +252,7 @@ impl Bundle {
         pinned: Option<Sha256Digest>,
     ) -> Result<Self, BundleError> {
         let path = path.into();
-        let archive = archive::Archive::parse(&path, bytes)?;
+        let (archive, manifest) = archive::Archive::parse(&path, bytes)?;
         if let Some(pinned) = pinned
             && pinned != archive.digest
         {
@@ -262,16 +262,12 @@ impl Bundle {
                 actual: archive.digest,
             });
         }
-        let stage_digests = Stage::ALL.map(|stage| {
-            let range = archive.stages[stage as usize].clone();
-            Sha256Digest::of(&archive.bytes[range])
-        });
         Ok(Self {
             path,
             digest: archive.digest,
-            manifest: archive.manifest.clone(),
+            manifest,
             manifest_bytes: archive.bytes[archive.manifest_at.clone()].to_vec(),
-            stage_digests,
+            stage_digests: archive.stage_digests,
             source: Source::Archive(Box::new(archive)),
         })
     }
@@ -291,13 +287,7 @@ impl Bundle {
         let bytes = read(&path)?;
         let digest_path = dir.join(DIGEST_FILE);
         let digest_text = read(&digest_path)?;
-        let recorded = std::str::from_utf8(&digest_text)
-            .map_err(|e| DigestParseError::NotLowerHex(e.valid_up_to()))
-            .and_then(Sha256Digest::parse)
-            .map_err(|reason| BundleError::DigestFile {
-                path: digest_path,
-                reason,
-            })?;
+        let recorded = parse_digest_file(digest_path, &digest_text)?;
         let digest = Sha256Digest::of(&bytes);
         if digest != recorded {
             return Err(BundleError::ManifestDigest {
@@ -315,27 +305,12 @@ impl Bundle {
                 actual: digest,
             });
         }
-        let manifest = Manifest::parse(&bytes).map_err(|message| BundleError::Manifest {
-            path: path.clone(),
-            message,
-        })?;
-        manifest.model.validate().map_err(|e| BundleError::Dims {
-            path: path.clone(),
-            reason: e.to_string(),
-        })?;
-        manifest.check_stage_names()?;
+        let manifest = checked_manifest(&path, &bytes)?;
         let mut stage_digests = [digest; Stage::ALL.len()];
         for (slot, stage) in stage_digests.iter_mut().zip(Stage::ALL) {
-            let entry = manifest.stage(stage)?;
-            entry.check_interface(stage, &manifest.model)?;
-            let expected =
-                Sha256Digest::parse(&entry.sha256).map_err(|reason| BundleError::StageDigest {
-                    stage: stage.name(),
-                    reason,
-                })?;
+            let (entry, expected) = checked_stage_entry(&manifest, stage)?;
             let file = stage_file(&dir, stage, &entry.file)?;
-            let bytes = read(&file)?;
-            verify(stage, file, bytes, expected)?;
+            verify(stage, &file, &read(&file)?, expected)?;
             *slot = expected;
         }
         Ok(Self {
@@ -410,7 +385,8 @@ impl Bundle {
             Source::Dir => {
                 let file = self.stage_path(stage)?;
                 let bytes = read(&file)?;
-                verify(stage, file, bytes, self.stage_digests[stage as usize]).map(Cow::Owned)
+                verify(stage, &file, &bytes, self.stage_digests[stage as usize])?;
+                Ok(Cow::Owned(bytes))
             }
             Source::Archive(archive) => {
                 let range = archive.stages[stage as usize].clone();
@@ -449,21 +425,60 @@ fn stage_file(dir: &Path, stage: Stage, file: &str) -> Result<PathBuf, BundleErr
     }
 }
 
+/// `bytes` against `expected`, the SHA-256 the manifest gives `stage` (`file` names it).
 fn verify(
     stage: Stage,
-    file: PathBuf,
-    bytes: Vec<u8>,
+    file: &Path,
+    bytes: &[u8],
     expected: Sha256Digest,
-) -> Result<Vec<u8>, BundleError> {
-    let actual = Sha256Digest::of(&bytes);
+) -> Result<(), BundleError> {
+    let actual = Sha256Digest::of(bytes);
     if actual == expected {
-        Ok(bytes)
+        Ok(())
     } else {
         Err(BundleError::Checksum {
             stage: stage.name(),
-            file,
+            file: file.to_path_buf(),
             expected,
             actual,
         })
     }
+}
+
+/// A digest file's bytes (`manifest.sha256`, a compiled bundle's `bundle.sha256`): one strict
+/// lowercase hex SHA-256.
+fn parse_digest_file(path: PathBuf, bytes: &[u8]) -> Result<Sha256Digest, BundleError> {
+    std::str::from_utf8(bytes)
+        .map_err(|e| DigestParseError::NotLowerHex(e.valid_up_to()))
+        .and_then(Sha256Digest::parse)
+        .map_err(|reason| BundleError::DigestFile { path, reason })
+}
+
+/// Checks 2-4 of the module doc on a manifest's bytes (`path` names it): TOML, numbers, stage
+/// names.
+fn checked_manifest(path: &Path, bytes: &[u8]) -> Result<Manifest, BundleError> {
+    let manifest = Manifest::parse(bytes).map_err(|message| BundleError::Manifest {
+        path: path.to_path_buf(),
+        message,
+    })?;
+    manifest.model.validate().map_err(|e| BundleError::Dims {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    manifest.check_stage_names()?;
+    Ok(manifest)
+}
+
+/// Check 5 up to the stage's bytes: its entry, its interface and its SHA-256 as a digest.
+fn checked_stage_entry(
+    manifest: &Manifest,
+    stage: Stage,
+) -> Result<(&StageEntry, Sha256Digest), BundleError> {
+    let entry = manifest.stage(stage)?;
+    entry.check_interface(stage, &manifest.model)?;
+    let digest = Sha256Digest::parse(&entry.sha256).map_err(|reason| BundleError::StageDigest {
+        stage: stage.name(),
+        reason,
+    })?;
+    Ok((entry, digest))
 }
