@@ -13,7 +13,15 @@ CARGO ?= cargo
 demo:
 	$(CARGO) run -p satmap-sim -- drive --out out/demo
 
-test: lint nostd test-rust test-c test-python test-paper
+# The Python venv (pip, ~5 GB of wheels: network and disk, not CPU) installs in the background
+# while the Rust steps compile; its log is printed after them, and either failing fails `test`.
+test:
+	@mkdir -p out
+	@{ $(MAKE) --no-print-directory venv > out/venv.log 2>&1; echo $$? > out/venv.rc; } & \
+	  $(MAKE) --no-print-directory lint nostd test-rust test-c; rust=$$?; wait; \
+	  echo "--- make venv (run beside the Rust steps):"; cat out/venv.log; \
+	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0
+	$(MAKE) --no-print-directory test-python test-paper
 
 lint:
 	$(CARGO) fmt --all -- --check
