@@ -6,12 +6,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use satmap_layout::MemoryLayout;
 use satmap_runtime::bundle::Bundle;
 use satmap_runtime::bundle::compile::compile;
 use satmap_runtime::engine_tract::TractEngine;
 
-use crate::cli::memory_map::{BUILT_IN_LAYOUT, built_in_layout_line};
+use crate::cli::memory_map::{built_in_layout_line, read_layout};
 
 /// Arguments of `compile`.
 #[derive(clap::Args, Debug)]
@@ -34,11 +33,7 @@ pub struct Args {
 /// The source bundle refused, a stage that does not translate, the layout too small, or the
 /// output not writable.
 pub fn run(args: &Args) -> Result<()> {
-    let text = match &args.layout {
-        Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
-        None => BUILT_IN_LAYOUT.to_owned(),
-    };
-    let layout = MemoryLayout::parse(&text).context("memory layout")?;
+    let layout = read_layout(args.layout.as_deref())?;
     let source = Bundle::open(&args.bundle)?;
     let compiled = compile(&source, |name| layout.region(name).map(|r| r.bytes))?;
     std::fs::write(&args.out, &compiled.bytes)

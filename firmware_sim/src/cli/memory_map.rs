@@ -3,7 +3,7 @@
 //! with its offset, bytes, owner, dtype and shape, the totals and the arena headroom; with
 //! `--bundle`, also whether that bundle's buffers fit the layout's regions.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use satmap_layout::MemoryLayout;
@@ -27,6 +27,21 @@ pub fn built_in_layout_line() -> String {
     )
 }
 
+/// The layout file at `path`, or the one this binary was built with; errors name which.
+///
+/// # Errors
+/// An unreadable file or an invalid layout.
+pub fn read_layout(path: Option<&Path>) -> Result<MemoryLayout> {
+    let text = match path {
+        Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
+        None => BUILT_IN_LAYOUT.to_owned(),
+    };
+    MemoryLayout::parse(&text).with_context(|| match path {
+        Some(p) => p.display().to_string(),
+        None => format!("built-in layout {}", layout::SOURCE_PATH),
+    })
+}
+
 /// Arguments of `memory-map`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -43,14 +58,7 @@ pub struct Args {
 /// # Errors
 /// An unreadable or invalid layout, or a bundle that does not fit.
 pub fn run(args: &Args) -> Result<()> {
-    let text = match &args.layout {
-        Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
-        None => BUILT_IN_LAYOUT.to_owned(),
-    };
-    let map = MemoryLayout::parse(&text).with_context(|| match &args.layout {
-        Some(p) => p.display().to_string(),
-        None => format!("built-in layout {}", layout::SOURCE_PATH),
-    })?;
+    let map = read_layout(args.layout.as_deref())?;
     match &args.layout {
         Some(p) => println!("layout {} ({})", p.display(), built_in_layout_line()),
         None => println!("{}", built_in_layout_line()),
