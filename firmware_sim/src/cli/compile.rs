@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use satmap_runtime::bundle::Bundle;
 use satmap_runtime::bundle::compile::compile;
+use satmap_runtime::bundle::{Bundle, Precision};
 use satmap_runtime::engine_tract::TractEngine;
 
 use crate::cli::memory_map::{built_in_layout_line, read_layout};
@@ -21,6 +21,10 @@ pub struct Args {
     /// The compiled bundle to write (by convention `<name>.satmap`).
     #[arg(long)]
     pub out: PathBuf,
+    /// Precision: f32 (as exported), f16 (weights stored as f16, widened at load) or int8
+    /// (from a quantised folder bundle).
+    #[arg(long, default_value = "f32")]
+    pub precision: Precision,
     /// Memory layout the model must fit (default: the one this binary was built with).
     #[arg(long)]
     pub layout: Option<PathBuf>,
@@ -35,7 +39,9 @@ pub struct Args {
 pub fn run(args: &Args) -> Result<()> {
     let layout = read_layout(args.layout.as_deref())?;
     let source = Bundle::open(&args.bundle)?;
-    let compiled = compile(&source, |name| layout.region(name).map(|r| r.bytes))?;
+    let compiled = compile(&source, args.precision, |name| {
+        layout.region(name).map(|r| r.bytes)
+    })?;
     std::fs::write(&args.out, &compiled.bytes)
         .with_context(|| format!("writing {}", args.out.display()))?;
     match &args.layout {
@@ -43,15 +49,16 @@ pub fn run(args: &Args) -> Result<()> {
         None => println!("{}", built_in_layout_line()),
     }
     println!(
-        "{:<18} {:>12} {:>12} {:>14}",
-        "stage", "onnx bytes", "nnef bytes", "translate ms"
+        "precision {}\n{:<18} {:>12} {:>12} {:>16} {:>14}",
+        args.precision, "stage", "onnx bytes", "nnef bytes", "f32 weight bytes", "translate ms"
     );
     for s in &compiled.stages {
         println!(
-            "{:<18} {:>12} {:>12} {:>14.1}",
+            "{:<18} {:>12} {:>12} {:>16} {:>14.1}",
             s.stage.name(),
             s.onnx_bytes,
             s.nnef_bytes,
+            s.f32_weight_bytes,
             s.translate_ms
         );
     }

@@ -46,6 +46,52 @@ pub struct StageEntry {
     pub outputs: Vec<TensorSpec>,
 }
 
+/// How a compiled bundle stores its stage weights and what its graphs compute in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// f32 weights, f32 arithmetic (the export as it is).
+    #[default]
+    F32,
+    /// f16 weights, widened to f32 when the graph is optimised at load: half the flash, the
+    /// same f32 arithmetic on a target without f16 compute (x86 here).
+    F16,
+    /// int8 weights and activations on the matmuls and convolutions, calibrated offline.
+    Int8,
+}
+
+impl Precision {
+    /// Every precision, in the order tables list them.
+    pub const ALL: [Self; 3] = [Self::F32, Self::F16, Self::Int8];
+
+    /// The name the manifest and the command line use.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::F32 => "f32",
+            Self::F16 => "f16",
+            Self::Int8 => "int8",
+        }
+    }
+}
+
+impl core::fmt::Display for Precision {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::str::FromStr for Precision {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| format!("unknown precision `{s}` (f32, f16 or int8)"))
+    }
+}
+
 /// Where a compiled bundle came from: its manifest's `[compiled]` table (absent in a folder's).
 #[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -58,6 +104,9 @@ pub struct CompiledFrom {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
+    /// Storage and arithmetic precision of the stages (top-level `precision`; f32 when absent).
+    #[serde(default)]
+    pub precision: Precision,
     /// Model dimensions and configuration.
     pub model: ModelDims,
     /// Provenance, in a compiled bundle only.

@@ -20,7 +20,7 @@ mod manifest;
 mod model_table;
 
 pub use digest::{DigestParseError, Sha256Digest};
-pub use manifest::{CompiledFrom, DType, Manifest, StageEntry, TensorSpec};
+pub use manifest::{CompiledFrom, DType, Manifest, Precision, StageEntry, TensorSpec};
 pub use model_table::ModelTable;
 
 use std::borrow::Cow;

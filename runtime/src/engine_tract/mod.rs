@@ -21,7 +21,7 @@ use std::sync::Arc;
 use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
 
-use crate::bundle::{Bundle, BundleError, DType, GraphFormat, StageEntry, TensorSpec};
+use crate::bundle::{Bundle, BundleError, DType, GraphFormat, Precision, StageEntry, TensorSpec};
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
@@ -42,9 +42,7 @@ impl StageRunner {
         let engine_err = engine_error(stage);
         let model = match bundle.format() {
             GraphFormat::Nnef => {
-                let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
-                check_io_names(stage, &graph_io_names(&model)?, entry)?;
-                model
+                nnef_model(stage, nnef, &bytes, entry, bundle.manifest().precision)?
             }
             GraphFormat::Onnx => onnx_model(stage, &bytes, entry)?,
         };
@@ -185,6 +183,31 @@ pub(crate) fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError +
     move |e| BundleError::Engine {
         stage: stage.name(),
         message: format!("{e:#}"),
+    }
+}
+
+/// The typed model of a compiled stage: its NNEF tar read through tract-core's registry, names
+/// bound, and an f16 graph widened to f32: this target has no f16 arithmetic (on x86 tract's
+/// f16 kernels are portable fallbacks, tens of times slower than f32), so the f16 bundle is an
+/// f16 *storage* format here. The widened constants fold into f32 ones when the plan is
+/// optimised, so a stage's RAM is what the f32 bundle's is; its flash is half.
+pub(crate) fn nnef_model(
+    stage: Stage,
+    nnef: &Nnef,
+    bytes: &[u8],
+    entry: &StageEntry,
+    precision: Precision,
+) -> Result<TypedModel, BundleError> {
+    use tract_nnef::tract_core::floats::FloatPrecisionTranslator;
+    use tract_nnef::tract_core::transform::ModelTransform as _;
+    let engine_err = engine_error(stage);
+    let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
+    check_io_names(stage, &graph_io_names(&model)?, entry)?;
+    match precision {
+        Precision::F16 => FloatPrecisionTranslator::new(f16::datum_type(), f32::datum_type())
+            .transform_into(model)
+            .map_err(engine_err),
+        Precision::F32 | Precision::Int8 => Ok(model),
     }
 }
 

@@ -14,15 +14,20 @@
 //! The artifact is what is pinned; its manifest records the folder digest it came from
 //! (`[compiled] source_digest`).
 //! The archive format is in [`super::archive`].
+//!
+//! Precision: [`Precision::F32`] writes the decluttered graph as it is; [`Precision::F16`]
+//! stores its weights as f16 first ([`f16_weights`]); [`Precision::Int8`] would compile a
+//! folder whose ONNX stages are already quantised (manifest `precision = "int8"`): an f32 folder
+//! is refused, and tract 0.23.9 cannot yet write such a graph as NNEF (`docs/int8.md`).
+
+pub mod f16_weights;
 
 use std::time::Instant;
 
-use tract_nnef::prelude::*;
-
 use super::archive::write_archive;
-use super::{Bundle, BundleError, GraphFormat, MANIFEST_FILE};
+use super::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision};
 use crate::engine::Stage;
-use crate::engine_tract::{check_graph_io, engine_error, onnx_model};
+use crate::engine_tract::{check_graph_io, engine_error, nnef_model, onnx_model};
 use crate::error::InitError;
 use crate::regions::check_regions_with;
 
@@ -38,6 +43,16 @@ pub enum CompileError {
     /// The source is already a compiled bundle.
     #[error("{0} is already a compiled bundle")]
     AlreadyCompiled(std::path::PathBuf),
+    /// The precision asked for cannot be made from this folder.
+    #[error("{path}: cannot compile to {asked}: {why}")]
+    Precision {
+        /// The folder bundle.
+        path: std::path::PathBuf,
+        /// The precision asked for.
+        asked: Precision,
+        /// Why not.
+        why: &'static str,
+    },
 }
 
 /// What compiling one stage gave.
@@ -49,6 +64,8 @@ pub struct StageCompiled {
     pub onnx_bytes: usize,
     /// Bytes of its NNEF tar.
     pub nnef_bytes: usize,
+    /// Bytes of f32 weights in the decluttered graph (constants the f16 form halves).
+    pub f32_weight_bytes: usize,
     /// Translating ONNX to a decluttered typed model and writing it (ms).
     pub translate_ms: f64,
 }
@@ -68,17 +85,40 @@ pub fn stage_entry_name(stage: Stage) -> String {
     format!("{}.nnef.tar", stage.name())
 }
 
-/// Compile the folder bundle `bundle` for a memory layout whose region capacities `capacity`
-/// gives (bytes by region name; the built-in layout is [`crate::regions::check_regions`]'s).
+/// Compile the folder bundle `bundle` to `precision` for a memory layout whose region
+/// capacities `capacity` gives (bytes by region name; the built-in layout is
+/// [`crate::regions::check_regions`]'s).
 ///
 /// # Errors
 /// [`CompileError`] naming the stage, tensor or region that failed.
 pub fn compile(
     bundle: &Bundle,
+    precision: Precision,
     capacity: impl Fn(&str) -> Option<usize>,
 ) -> Result<Compiled, CompileError> {
     if bundle.format() != GraphFormat::Onnx {
         return Err(CompileError::AlreadyCompiled(bundle.path().to_path_buf()));
+    }
+    let folder = bundle.manifest().precision;
+    let refuse = |why| CompileError::Precision {
+        path: bundle.path().to_path_buf(),
+        asked: precision,
+        why,
+    };
+    match (folder, precision) {
+        (Precision::F32, Precision::F32 | Precision::F16) | (Precision::Int8, Precision::Int8) => {}
+        (Precision::F32, Precision::Int8) => {
+            return Err(refuse(
+                "int8 needs a folder of quantised ONNX stages, and tract 0.23.9 cannot \
+                 serialise those to NNEF (docs/int8.md)",
+            ));
+        }
+        (Precision::Int8, _) => {
+            return Err(refuse(
+                "the folder's stages are int8: compile it with --precision int8",
+            ));
+        }
+        (Precision::F16, _) => return Err(refuse("a folder bundle is f32 or int8")),
     }
     check_regions_with(bundle.dims(), capacity).map_err(CompileError::Layout)?;
     let core_only = tract_nnef::nnef();
@@ -93,24 +133,28 @@ pub fn compile(
             .into_decluttered()
             .map_err(engine_err)?;
         check_graph_io(stage, &model, &entry.inputs, &entry.outputs)?;
+        let f32_weight_bytes = f16_weights::f32_weight_bytes(&model);
+        let model = match precision {
+            Precision::F16 => f16_weights::to_f16(&model).map_err(engine_err)?,
+            Precision::F32 | Precision::Int8 => model,
+        };
         let tar = core_only
             .write_to_tar_with_config(&model, Vec::new(), false, true)
             .map_err(engine_err)?;
         let translate_ms = started.elapsed().as_secs_f64() * 1e3;
         // As the ECU engine will read it: tract-core's registry only, names and facts checked.
-        let back = core_only
-            .model_for_read(&mut tar.as_slice())
-            .map_err(engine_err)?;
+        let back = nnef_model(stage, &core_only, &tar, entry, precision)?;
         check_graph_io(stage, &back, &entry.inputs, &entry.outputs)?;
         stages.push(StageCompiled {
             stage,
             onnx_bytes: onnx.len(),
             nnef_bytes: tar.len(),
+            f32_weight_bytes,
             translate_ms,
         });
         nnef_tars.push((stage_entry_name(stage), tar));
     }
-    let manifest = compiled_manifest(bundle, &nnef_tars)?;
+    let manifest = compiled_manifest(bundle, precision, &nnef_tars)?;
     let entries: Vec<(&str, &[u8])> = nnef_tars
         .iter()
         .map(|(name, tar)| (name.as_str(), tar.as_slice()))
@@ -123,7 +167,11 @@ pub fn compile(
 
 /// The folder's manifest with each stage's `file` and `sha256` pointing at its NNEF entry; the
 /// `[model]` table and every interface are carried over as written.
-fn compiled_manifest(bundle: &Bundle, tars: &[(String, Vec<u8>)]) -> Result<String, BundleError> {
+fn compiled_manifest(
+    bundle: &Bundle,
+    precision: Precision,
+    tars: &[(String, Vec<u8>)],
+) -> Result<String, BundleError> {
     let path = bundle.path().join(MANIFEST_FILE);
     let manifest_err = |message: String| BundleError::Manifest {
         path: path.clone(),
@@ -158,6 +206,7 @@ fn compiled_manifest(bundle: &Bundle, tars: &[(String, Vec<u8>)]) -> Result<Stri
     let mut compiled = toml::Table::new();
     compiled.insert("source_digest".into(), bundle.digest().to_string().into());
     table.insert("compiled".into(), compiled.into());
+    table.insert("precision".into(), precision.name().into());
     let body = toml::to_string(&table).map_err(|e| manifest_err(e.to_string()))?;
     Ok(format!(
         "# SatMap compiled bundle manifest, written by `satmap-sim compile`.\n{body}"
