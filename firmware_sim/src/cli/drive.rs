@@ -85,6 +85,12 @@ pub struct Args {
     /// ahead at the paper's size).
     #[arg(long, value_parser = parse_crop, requires = "satellite_only")]
     pub crop: Option<CropSpec>,
+    /// After the drive, replay it again with this bundle (the f32 one, when `--bundle` is a lower
+    /// precision) and print how far `--bundle`'s maps are from its maps: elements matched by
+    /// decoder instance, their mean Chamfer distance, the share whose class changed or that left
+    /// the top-k, and both runs' mAP.
+    #[arg(long, value_name = "BUNDLE", conflicts_with = "satellite_only")]
+    pub deviation_from: Option<PathBuf>,
 }
 
 fn parse_crop(text: &str) -> Result<CropSpec, String> {
@@ -202,6 +208,9 @@ pub fn run(
         if let Some(out) = &args.out {
             write_outputs(out, &outcome)?;
         }
+        if let Some(reference) = &args.deviation_from {
+            print_deviation(&cfg, reference, &outcome)?;
+        }
         match (report.degraded_verdict(), report.within_budgets()) {
             (None, true) => Ok(()),
             (None, false) => Err(BudgetExceeded(report.exceeded.join("; ")).into()),
@@ -213,6 +222,50 @@ pub fn run(
             .into()),
         }
     })
+}
+
+/// `--deviation-from`: the same drive through `reference` (outside the arena: its figures are
+/// not this run's), compared map by map.
+fn print_deviation(
+    cfg: &ReplayConfig,
+    reference: &Path,
+    outcome: &crate::harness::Replay,
+) -> Result<()> {
+    let cfg = ReplayConfig {
+        bundle_dir: reference.to_path_buf(),
+        show_progress: false,
+        ..cfg.clone()
+    };
+    let base = replay(&cfg, None)?;
+    let map_of = |r: &crate::harness::Replay| {
+        r.report
+            .map_quality
+            .as_ref()
+            .map_or(f64::NAN, |q| q.mean_ap)
+    };
+    let (ours, theirs) = (map_of(outcome), map_of(&base));
+    let d = crate::eval::deviation::deviation(&base.maps, &outcome.maps);
+    println!(
+        "deviation from {}: {} steps, {} elements; kept {} (mean Chamfer {:.4} m, max {:.4} m), \
+         class changed {}, left the top-k {} ({:.2}% changed)",
+        reference.display(),
+        d.steps,
+        d.elements,
+        d.kept,
+        d.mean_chamfer_m,
+        d.max_chamfer_m,
+        d.flipped,
+        d.dropped,
+        100.0 * d.changed_share()
+    );
+    println!(
+        "mAP {:.4} against {:.4} for {} (change {:+.2} points)",
+        ours,
+        theirs,
+        reference.display(),
+        100.0 * (ours - theirs)
+    );
+    Ok(())
 }
 
 /// `--satellite-only`: the route replay, its report, and exit 4 when its worst step exceeds the

@@ -8,12 +8,14 @@
 //!   report.
 //! - `maptr_json`: the vector record, our `{"results": {token: {"vectors": [...]}}}` layout, the
 //!   errors.
+//! - `deviation`: one replay's maps against another's (lower precision against f32).
 //! - `maptr_files`: MapTR's `{"results": [...]}` and `{"GTs": [...]}` files; the reader of all
 //!   three layouts.
 
 pub mod average_precision;
 pub mod buffer;
 pub mod chamfer;
+pub mod deviation;
 pub mod map_vector;
 pub mod maptr_files;
 pub mod maptr_json;

@@ -119,4 +119,6 @@ pub struct Replay {
     pub last: Option<LastStep>,
     /// GeoJSON features of every step's predictions in the world frame.
     pub features: Vec<geojson::Feature>,
+    /// Every step's published map, in step order (what [`crate::eval::deviation`] compares).
+    pub maps: Vec<satmap_runtime::map_frame::MapFrame>,
 }

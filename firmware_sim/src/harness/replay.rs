@@ -160,6 +160,7 @@ pub fn replay(
     let after_init = stats_of(alloc);
 
     // Host-side buffers, reserved before the loop.
+    let mut maps = Vec::new();
     let (mut images, mut steps, mut predictions, mut truth, mut features, progress) =
         host(alloc, || {
             let progress = if cfg.show_progress && frames > 1 {
@@ -261,6 +262,7 @@ pub fn replay(
         host(alloc, || {
             let name = frame_dir_name(k);
             if let Some(map) = satmap.last_map() {
+                maps.push(map.clone());
                 let preds = to_vectors(map);
                 features.extend(crate::render::frame_features(
                     &sensor.world_pose,
@@ -316,5 +318,6 @@ pub fn replay(
         report,
         last,
         features,
+        maps,
     })
 }
