@@ -31,15 +31,18 @@ fn built_in_capacity() -> impl Fn(&str) -> Option<usize> {
     move |name| map.region(name).map(|r| r.bytes)
 }
 
+/// The committed `test` folder compiled to `precision`.
+fn compile_test_folder(precision: Precision) -> Vec<u8> {
+    let source = Bundle::open(bundle_dir()).unwrap();
+    compile(&source, precision, built_in_capacity())
+        .unwrap()
+        .bytes
+}
+
 /// The `test` bundle compiled once per test process.
 fn compiled() -> &'static [u8] {
     static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
-    BYTES.get_or_init(|| {
-        let source = Bundle::open(bundle_dir()).unwrap();
-        compile(&source, Precision::F32, built_in_capacity())
-            .unwrap()
-            .bytes
-    })
+    BYTES.get_or_init(|| compile_test_folder(Precision::F32))
 }
 
 fn open_compiled(bytes: &[u8]) -> Result<Bundle, BundleError> {
@@ -357,12 +360,7 @@ fn the_ecu_build_has_no_onnx_front_end() {
 /// The `test` bundle compiled to f16 once per test process.
 fn compiled_f16() -> &'static [u8] {
     static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
-    BYTES.get_or_init(|| {
-        let source = Bundle::open(bundle_dir()).unwrap();
-        compile(&source, Precision::F16, built_in_capacity())
-            .unwrap()
-            .bytes
-    })
+    BYTES.get_or_init(|| compile_test_folder(Precision::F16))
 }
 
 /// Largest deviation of the f16 bundle from the f32 one per stage buffer, over both golden
