@@ -1,6 +1,6 @@
 /* Replays the committed scenario (scenario.bin) through the SatMap C API over static,
  * caller-owned regions, checks every published map frame's E2E protection and compares its
- * digest with the Rust run (expected.txt). Exit status 0 only when every check passes.
+ * digest with the Rust run (expected-<kernel family>.txt). Exit status 0 only when every check passes.
  *
  * Usage: replay <bundle dir> <calibration.toml> <scenario.bin> <expected.txt> [memcheck]
  *
@@ -140,7 +140,7 @@ int main(int argc, char **argv) {
     return fail("scenario size does not match its header");
   }
 
-  /* expected.txt: one "<sequence> <digest hex>" line per frame. */
+  /* expected-<family>.txt: one "<sequence> <digest hex>" line per frame. */
   uint64_t want_seq[MAX_FRAMES], want_digest[MAX_FRAMES];
   size_t n_want = 0;
   char *line = strtok((char *)exp, "\n");

@@ -31,6 +31,11 @@ pub fn engine() -> TractEngine {
     TractEngine::open(bundle_dir()).unwrap()
 }
 
+/// The tract engine over the committed compiled `test` bundle, as an ECU (and the C API) loads it.
+pub fn compiled_engine() -> TractEngine {
+    TractEngine::open(root().join("models/bundles/test.satmap")).unwrap()
+}
+
 /// One golden safetensors file, owned.
 pub struct Golden {
     bytes: Vec<u8>,

@@ -25,6 +25,25 @@ use crate::bundle::{Bundle, BundleError, DType, GraphFormat, Precision, StageEnt
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
+/// The family of f32 kernels tract 0.23.9 picks on this CPU: `avx512f`, `fma` (AVX2 and FMA) or
+/// `generic`. Outputs are bit-identical run to run on one family, not across families: the
+/// vector width changes matmul tiling and so summation order (measured: the demo drive's run
+/// digest and the C example's map digests differ between an AVX-512 Xeon and an AVX2 EPYC,
+/// values within 2e-5). Digests committed from a run are therefore kept per family.
+#[must_use]
+pub fn kernel_family() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx512f") {
+            return "avx512f";
+        }
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            return "fma";
+        }
+    }
+    "generic"
+}
+
 /// One loaded stage: its plan's reused state and its input tensors.
 struct StageRunner {
     stage: Stage,
