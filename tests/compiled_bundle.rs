@@ -1,8 +1,9 @@
 //! The compiled bundle (`satmap-sim compile`, `bundle::compile`): the committed `test` folder
 //! bundle compiled to one NNEF archive steps bit-identically to the ONNX folder and within the
 //! goldens' tolerance; the committed `test.satmap` is current; a flipped byte, a graph whose
-//! inputs are swapped and a layout too small are refused; and the ECU build of the runtime
-//! carries no ONNX front end.
+//! inputs are swapped and a layout too small are refused; the ECU build of the runtime carries
+//! no ONNX front end; and the f16 and int8 bundles step within measured bounds of f32, per stage
+//! and in map space over a replay.
 
 mod common;
 
@@ -81,17 +82,29 @@ fn committed() -> std::path::PathBuf {
     common::root().join("models/bundles/test.satmap")
 }
 
-/// The compiled bundles compute what the ONNX folder computes: every stage buffer of both golden
-/// frames bit-identical (tract optimises the same decluttered graph either way), hence also
-/// within the reference's tolerance. Both the committed file and a fresh compile.
+/// Bound on the committed compiled bundle against the ONNX folder, per stage buffer. Its graphs
+/// are the folder's, decluttered on another day: tract names some split nodes in hash order, and
+/// on some CPUs it then optimises the two graphs into different summation orders (measured
+/// 2026-12-02 on an AVX2-only EPYC: map_decoder's class logits 2.0e-5, points 6.7e-6 apart;
+/// bit-identical on the AVX-512 machine it was compiled on). Half the reference tolerance.
+const COMMITTED_TOL: f32 = 5e-5;
+
+/// The compiled bundles compute what the ONNX folder computes: a fresh compile bit-identical in
+/// every stage buffer of both golden frames (tract optimises the same decluttered graph either
+/// way), the committed file within [`COMMITTED_TOL`] of it, and both within the reference's
+/// tolerance.
 #[test]
 fn compiled_bundles_step_bit_identically_to_the_onnx_folder() {
     let folder = Bundle::open(bundle_dir()).unwrap();
     assert_eq!(folder.format(), GraphFormat::Onnx);
     let from_onnx = stage_buffers(&folder);
-    for (what, bundle) in [
-        ("committed", Bundle::open(committed()).unwrap()),
-        ("fresh", open_compiled(compiled()).unwrap()),
+    for (what, bundle, tol) in [
+        ("fresh", open_compiled(compiled()).unwrap(), 0.0),
+        (
+            "committed",
+            Bundle::open(committed()).unwrap(),
+            COMMITTED_TOL,
+        ),
     ] {
         assert_eq!(bundle.format(), GraphFormat::Nnef);
         let from_nnef = stage_buffers(&bundle);
@@ -100,11 +113,13 @@ fn compiled_bundles_step_bit_identically_to_the_onnx_folder() {
                 .iter()
                 .zip(onnx)
                 .all(|(a, b)| a.to_bits() == b.to_bits());
-            assert!(
-                same,
-                "{what} {name}: NNEF and ONNX differ by {:e}",
-                max_abs_diff(nnef, onnx)
-            );
+            let apart = max_abs_diff(nnef, onnx);
+            println!("{what} {name}: NNEF vs ONNX max abs diff {apart:e}");
+            if tol == 0.0 {
+                assert!(same, "{what} {name}: NNEF and ONNX differ by {apart:e}");
+            } else {
+                assert!(apart <= tol, "{what} {name}: {apart:e} > {tol:e}");
+            }
             let d = max_abs_diff(nnef, golden);
             println!("{what} {name}: compiled vs reference max abs diff {d:e}");
             assert!(d <= STAGE_TOL, "{what} {name}: {d:e} > {STAGE_TOL:e}");
@@ -357,10 +372,15 @@ fn the_ecu_build_has_no_onnx_front_end() {
     assert!(has(&tree("onnx"), "tract-onnx"));
 }
 
-/// The `test` bundle compiled to f16 once per test process.
-fn compiled_f16() -> &'static [u8] {
-    static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
-    BYTES.get_or_init(|| compile_test_folder(Precision::F16))
+/// The `test` bundle compiled to a lower precision once per test process.
+fn compiled_as(precision: Precision) -> &'static [u8] {
+    static F16: OnceLock<Vec<u8>> = OnceLock::new();
+    static INT8: OnceLock<Vec<u8>> = OnceLock::new();
+    match precision {
+        Precision::F32 => compiled(),
+        Precision::F16 => F16.get_or_init(|| compile_test_folder(Precision::F16)),
+        Precision::Int8 => INT8.get_or_init(|| compile_test_folder(Precision::Int8)),
+    }
 }
 
 /// Largest deviation of the f16 bundle from the f32 one per stage buffer, over both golden
@@ -377,76 +397,141 @@ const F16_BOUNDS: [(&str, f32); 8] = [
     ("points", 0.048),         // 2.39e-2 (normalised to the BEV range)
 ];
 
-/// The f16 bundle: its manifest says f16, its file is smaller than the f32 one by most of the
-/// weights' bytes, it loads and steps through `SatMap`, and every stage buffer stays within
-/// [`F16_BOUNDS`] of the f32 bundle's (and moves: the rounding is real).
-#[test]
-fn the_f16_bundle_steps_within_its_bounds_of_f32() {
-    let f16 = open_compiled(compiled_f16()).unwrap();
-    assert_eq!(f16.manifest().precision, Precision::F16);
+/// The same for the int8 bundle (int8 weights, one scale per output channel, f32 arithmetic):
+/// measured (2026-12-02) and doubled.
+const INT8_BOUNDS: [(&str, f32); 8] = [
+    ("value", 0.05),         // measured 2.48e-2
+    ("bev_query", 1.05),     // 5.12e-1
+    ("gkt_weights", 0.25),   // 1.25e-1
+    ("gathered", 0.092),     // 4.55e-2
+    ("camera_bev", 1.4),     // 6.92e-1
+    ("satellite_bev", 0.23), // 1.12e-1
+    ("class_logits", 0.93),  // 4.62e-1
+    ("points", 0.18),        // 8.61e-2 (normalised to the BEV range)
+];
+
+/// `precision`'s bundle: its manifest says so, its file is at most `max_size_share` of the f32
+/// one, it loads and steps through `SatMap`, and every stage buffer stays within `bounds` of the
+/// f32 bundle's (and moves: the rounding is real).
+fn steps_within_bounds_of_f32(precision: Precision, bounds: &[(&str, f32)], max_size_share: f64) {
+    let low = open_compiled(compiled_as(precision)).unwrap();
+    assert_eq!(low.manifest().precision, precision);
     let f32_bundle = open_compiled(compiled()).unwrap();
     assert_eq!(f32_bundle.manifest().precision, Precision::F32);
-    let (small, big) = (compiled_f16().len(), compiled().len());
-    println!("f16 bundle {small} bytes, f32 {big} bytes");
-    assert!(small * 10 < big * 6, "{small} vs {big}");
+    let (small, big) = (compiled_as(precision).len(), compiled().len());
+    println!("{precision} bundle {small} bytes, f32 {big} bytes");
+    assert!(
+        (small as f64) < big as f64 * max_size_share,
+        "{small} vs {big}"
+    );
     let from_f32 = stage_buffers(&f32_bundle);
-    let from_f16 = stage_buffers(&f16);
+    let from_low = stage_buffers(&low);
     let mut moved = false;
-    for ((name, half, _), (_, full, _)) in from_f16.iter().zip(&from_f32) {
-        let d = max_abs_diff(half, full);
+    for ((name, got, _), (_, full, _)) in from_low.iter().zip(&from_f32) {
+        let d = max_abs_diff(got, full);
         moved |= d > 0.0;
         let stage = name.split(' ').nth(2).unwrap();
-        let bound = F16_BOUNDS
+        let bound = bounds
             .iter()
             .find(|(n, _)| *n == stage)
             .map(|(_, b)| *b)
             .unwrap();
-        println!("f16 {name}: max abs diff from f32 {d:e} (bound {bound:e})");
-        assert!(d <= bound, "f16 {name}: {d:e} > {bound:e}");
+        println!("{precision} {name}: max abs diff from f32 {d:e} (bound {bound:e})");
+        assert!(d <= bound, "{precision} {name}: {d:e} > {bound:e}");
     }
     assert!(
         moved,
-        "the f16 bundle computes exactly what f32 does: its weights were not rounded"
+        "the {precision} bundle computes exactly what f32 does: its weights were not rounded"
     );
 }
 
-/// int8 is not made from an f32 folder (tract 0.23.9 cannot serialise the quantised graph
-/// the ONNX quantiser writes: `docs/int8.md`): the compiler says so instead of writing f32.
+/// The f16 bundle, within [`F16_BOUNDS`], in under 60% of the f32 file.
 #[test]
-fn int8_from_an_f32_folder_is_refused() {
-    let source = Bundle::open(bundle_dir()).unwrap();
-    match compile(&source, Precision::Int8, built_in_capacity()) {
-        Err(CompileError::Precision { asked, .. }) => assert_eq!(asked, Precision::Int8),
-        other => panic!(
-            "expected a precision refusal, got {:?}",
-            other.map(|c| c.bytes.len())
-        ),
-    }
+fn the_f16_bundle_steps_within_its_bounds_of_f32() {
+    steps_within_bounds_of_f32(Precision::F16, &F16_BOUNDS, 0.6);
 }
 
-/// Bounds on the f16 bundle's maps against the f32 bundle's over the first 8 steps of the
-/// default synthetic drive (seed 1, 8 m/s, 2 Hz; `satmap-sim drive --bundle <f16> --frames 8
-/// --deviation-from models/bundles/test.satmap` prints the same figures). Measured 2026-12-01:
-/// mean Chamfer 0.081 m (max 0.44 m) over 398 kept of 400 elements, 2 left the top-k (0.5%),
-/// mAP +0.13 points. The Chamfer bound is the product's acceptance line for a precision
-/// (README, "Precision"); the share bound is three times the measured one.
-const F16_MEAN_CHAMFER_M: f64 = 0.1;
-const F16_CHANGED_SHARE: f64 = 0.015;
-const F16_MAP_DROP_POINTS: f64 = 1.0;
-
-/// The f16 bundle over a replay: elements matched by decoder instance stay within
-/// [`F16_MEAN_CHAMFER_M`] of the f32 bundle's, few change class or leave the top-k, and the mAP
-/// drops by less than a point; and the f32 bundle against itself deviates by nothing at all.
+/// The int8 bundle, within [`INT8_BOUNDS`], in under 45% of the f32 file.
 #[test]
-fn the_f16_bundle_maps_stay_close_to_f32_over_a_replay() {
+fn the_int8_bundle_steps_within_its_bounds_of_f32() {
+    steps_within_bounds_of_f32(Precision::Int8, &INT8_BOUNDS, 0.45);
+}
+
+/// A folder of already-quantised ONNX stages (manifest `precision = "int8"`) is refused by
+/// name, at any precision asked: tract 0.23.9 cannot write its quantise operators as NNEF
+/// (`docs/int8.md`), and int8 is made from the f32 folder instead.
+#[test]
+fn a_quantised_onnx_folder_is_refused() {
+    let dir = std::env::temp_dir().join(format!("satmap-int8-folder-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for entry in std::fs::read_dir(bundle_dir()).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+    }
+    let manifest = std::fs::read_to_string(dir.join(MANIFEST_FILE)).unwrap();
+    let manifest = format!("precision = \"int8\"\n{manifest}");
+    std::fs::write(dir.join(MANIFEST_FILE), &manifest).unwrap();
+    std::fs::write(
+        dir.join(satmap_runtime::bundle::DIGEST_FILE),
+        format!("{}\n", Sha256Digest::of(manifest.as_bytes())),
+    )
+    .unwrap();
+    let source = Bundle::open(&dir).unwrap();
+    assert_eq!(source.manifest().precision, Precision::Int8);
+    for asked in Precision::ALL {
+        match compile(&source, asked, built_in_capacity()) {
+            Err(CompileError::Precision { asked: a, why, .. }) => {
+                assert_eq!(a, asked);
+                println!("{asked}: {why}");
+            }
+            other => panic!(
+                "{asked}: expected a precision refusal, got {:?}",
+                other.map(|c| c.bytes.len())
+            ),
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Bounds on a lower precision's maps against the f32 bundle's over the first 8 steps of the
+/// default synthetic drive (seed 1, 8 m/s, 2 Hz; `satmap-sim drive --bundle <other> --frames 8
+/// --deviation-from models/bundles/test.satmap` prints the same figures). The Chamfer and mAP
+/// bounds are the product's acceptance line for a precision (README, "Precision"); the share
+/// bound is three times the measured one.
+struct MapBounds {
+    mean_chamfer_m: f64,
+    changed_share: f64,
+    map_drop_points: f64,
+}
+
+/// f16, measured 2026-12-01: mean Chamfer 0.081 m (max 0.44 m) over 398 kept of 400 elements,
+/// 2 left the top-k (0.5%), mAP +0.13 points.
+const F16_MAPS: MapBounds = MapBounds {
+    mean_chamfer_m: 0.1,
+    changed_share: 0.015,
+    map_drop_points: 1.0,
+};
+
+/// int8, measured 2026-12-02: mean Chamfer 0.222 m (max 0.61 m) over 384 kept of 400 elements,
+/// 11 changed class and 5 left the top-k (4%), mAP +1.55 points. Outside the product's line
+/// (0.1 m), so int8 is never the default; bounded at 1.5 times the measured Chamfer.
+const INT8_MAPS: MapBounds = MapBounds {
+    mean_chamfer_m: 0.33,
+    changed_share: 0.12,
+    map_drop_points: 1.0,
+};
+
+/// `precision`'s bundle over a replay: elements matched by decoder instance stay within
+/// `bounds` of the f32 bundle's; and the f32 bundle against itself deviates by nothing at all.
+fn maps_stay_close_to_f32(precision: Precision, bounds: &MapBounds) {
     use satmap_sim::eval::deviation::deviation;
     use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay};
     use satmap_sim::route_pack_builder::TileCompression;
 
-    let dir = std::env::temp_dir().join(format!("satmap-f16-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("satmap-{precision}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let f16_path = dir.join("test-f16.satmap");
-    std::fs::write(&f16_path, compiled_f16()).unwrap();
+    let low_path = dir.join(format!("test-{precision}.satmap"));
+    std::fs::write(&low_path, compiled_as(precision)).unwrap();
     let run = |bundle: std::path::PathBuf| {
         let cfg = ReplayConfig {
             bundle_dir: bundle,
@@ -464,23 +549,35 @@ fn the_f16_bundle_maps_stay_close_to_f32_over_a_replay() {
         replay(&cfg, None).unwrap()
     };
     let full = run(committed());
-    let half = run(f16_path);
+    let low = run(low_path);
     std::fs::remove_dir_all(&dir).ok();
     let same = deviation(&full.maps, &full.maps);
     assert_eq!(
         (same.kept, same.elements, same.mean_chamfer_m),
         (same.elements, 400, 0.0)
     );
-    let d = deviation(&full.maps, &half.maps);
+    let d = deviation(&full.maps, &low.maps);
     let map_of = |r: &satmap_sim::harness::Replay| r.report.map_quality.as_ref().unwrap().mean_ap;
-    let drop_points = 100.0 * (map_of(&full) - map_of(&half));
-    println!("f16 vs f32 over 8 steps: {d:?}, mAP drop {drop_points:.3} points");
+    let drop_points = 100.0 * (map_of(&full) - map_of(&low));
+    println!("{precision} vs f32 over 8 steps: {d:?}, mAP drop {drop_points:.3} points");
     assert_eq!(d.steps, 8);
     assert!(
         d.mean_chamfer_m > 0.0,
         "no deviation at all: the weights were not rounded"
     );
-    assert!(d.mean_chamfer_m < F16_MEAN_CHAMFER_M, "{d:?}");
-    assert!(d.changed_share() < F16_CHANGED_SHARE, "{d:?}");
-    assert!(drop_points < F16_MAP_DROP_POINTS, "{drop_points}");
+    assert!(d.mean_chamfer_m < bounds.mean_chamfer_m, "{d:?}");
+    assert!(d.changed_share() < bounds.changed_share, "{d:?}");
+    assert!(drop_points < bounds.map_drop_points, "{drop_points}");
+}
+
+/// The f16 bundle over a replay, within [`F16_MAPS`].
+#[test]
+fn the_f16_bundle_maps_stay_close_to_f32_over_a_replay() {
+    maps_stay_close_to_f32(Precision::F16, &F16_MAPS);
+}
+
+/// The int8 bundle over a replay, within [`INT8_MAPS`].
+#[test]
+fn the_int8_bundle_maps_stay_close_to_f32_over_a_replay() {
+    maps_stay_close_to_f32(Precision::Int8, &INT8_MAPS);
 }

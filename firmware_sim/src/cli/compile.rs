@@ -21,8 +21,8 @@ pub struct Args {
     /// The compiled bundle to write (by convention `<name>.satmap`).
     #[arg(long)]
     pub out: PathBuf,
-    /// Precision: f32 (as exported), f16 (weights stored as f16, widened at load) or int8
-    /// (from a quantised folder bundle).
+    /// Precision: f32 (as exported), f16 (weights stored as f16) or int8 (weights stored as
+    /// int8, one scale per output channel); both widened to f32 at load on this CPU.
     #[arg(long, default_value = "f32")]
     pub precision: Precision,
     /// Memory layout the model must fit (default: the one this binary was built with).

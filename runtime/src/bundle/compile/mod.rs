@@ -16,11 +16,13 @@
 //! The archive format is in [`super::archive`].
 //!
 //! Precision: [`Precision::F32`] writes the decluttered graph as it is; [`Precision::F16`]
-//! stores its weights as f16 first ([`f16_weights`]); [`Precision::Int8`] would compile a
-//! folder whose ONNX stages are already quantised (manifest `precision = "int8"`): an f32 folder
-//! is refused, and tract 0.23.9 cannot yet write such a graph as NNEF (`docs/int8.md`).
+//! stores its weights as f16 first ([`f16_weights`]); [`Precision::Int8`] stores its weights as
+//! int8 with per-channel scales ([`int8_weights`]). Both lower precisions are made from an f32
+//! folder; a folder of already-quantised ONNX stages (manifest `precision = "int8"`) is refused,
+//! since tract 0.23.9 cannot write its quantise/dequantise operators as NNEF (`docs/int8.md`).
 
 pub mod f16_weights;
+pub mod int8_weights;
 
 use std::time::Instant;
 
@@ -105,20 +107,16 @@ pub fn compile(
         asked: precision,
         why,
     };
-    match (folder, precision) {
-        (Precision::F32, Precision::F32 | Precision::F16) | (Precision::Int8, Precision::Int8) => {}
-        (Precision::F32, Precision::Int8) => {
+    match folder {
+        Precision::F32 => {}
+        Precision::Int8 => {
             return Err(refuse(
-                "int8 needs a folder of quantised ONNX stages, and tract 0.23.9 cannot \
-                 serialise those to NNEF (docs/int8.md)",
+                "its ONNX stages are quantised, and tract 0.23.9 cannot write their \
+                 quantise/dequantise operators as NNEF (docs/int8.md): compile the f32 \
+                 folder with --precision int8",
             ));
         }
-        (Precision::Int8, _) => {
-            return Err(refuse(
-                "the folder's stages are int8: compile it with --precision int8",
-            ));
-        }
-        (Precision::F16, _) => return Err(refuse("a folder bundle is f32 or int8")),
+        Precision::F16 => return Err(refuse("a folder bundle is f32 or int8")),
     }
     check_regions_with(bundle.dims(), capacity).map_err(CompileError::Layout)?;
     let core_only = tract_nnef::nnef();
@@ -134,13 +132,14 @@ pub fn compile(
             .map_err(engine_err)?;
         check_graph_io(stage, &model, &entry.inputs, &entry.outputs)?;
         let f32_weight_bytes = f16_weights::f32_weight_bytes(&model);
-        let model = match precision {
-            Precision::F16 => f16_weights::to_f16(&model).map_err(engine_err)?,
-            Precision::F32 | Precision::Int8 => model,
-        };
-        let tar = core_only
-            .write_to_tar_with_config(&model, Vec::new(), false, true)
-            .map_err(engine_err)?;
+        let tar = match precision {
+            Precision::F32 => core_only.write_to_tar_with_config(&model, Vec::new(), false, true),
+            Precision::F16 => f16_weights::to_f16(&model).and_then(|half| {
+                core_only.write_to_tar_with_config(&half, Vec::new(), false, true)
+            }),
+            Precision::Int8 => int8_weights::write_tar(&core_only, &model).map(|(tar, _)| tar),
+        }
+        .map_err(engine_err)?;
         let translate_ms = started.elapsed().as_secs_f64() * 1e3;
         // As the ECU engine will read it: tract-core's registry only, names and facts checked.
         let back = nnef_model(stage, &core_only, &tar, entry, precision)?;
