@@ -1,5 +1,6 @@
 """Issue point 6: the committed `test` bundle and golden vectors are current (regenerated bit for
-bit from fixed seeds) and hold exactly the tensors ARCHITECTURE.md lists."""
+bit from fixed seeds on the CPU kernel family they were made on; onnxruntime's floats within
+`CROSS_FAMILY_ATOL` on another) and hold exactly the tensors ARCHITECTURE.md lists."""
 
 import hashlib
 import tomllib
@@ -11,7 +12,8 @@ from safetensors.numpy import load_file
 from satmap_ref.export import StagedRunner, stage_io
 from satmap_ref.frames import Frame, decode
 from satmap_ref.golden import (DROPOUT_FILE, DROPOUT_KEYS, MODELS_ROOT, dropout_configs,
-                               dropout_tensors, generate, golden_frame, golden_paths)
+                               dropout_tensors, generate, golden_frame, golden_paths,
+                               stale_tensors)
 from satmap_ref.gkt import GktLut
 from satmap_ref.model import STAGE_NAMES
 
@@ -26,8 +28,14 @@ def test_committed_goldens_are_current(tmp_path):
     for rel in golden_paths(MODELS_ROOT):
         committed = MODELS_ROOT / rel
         fresh = tmp_path / rel
-        if not committed.exists() or _sha(committed) != _sha(fresh):
+        if not committed.exists():
             stale.append(str(rel))
+        elif _sha(committed) != _sha(fresh):
+            # Tensors computed by onnxruntime match bit for bit only on the kernel family they
+            # were made on (`stale_tensors`); every other file, byte for byte.
+            if rel.suffix != ".safetensors" or stale_tensors(load_file(str(committed)),
+                                                             load_file(str(fresh))):
+                stale.append(str(rel))
     assert not stale, f"stale golden files (run `python -m satmap_ref.golden`): {stale}"
 
 
@@ -151,12 +159,12 @@ def test_golden_dropout_layout(committed_lut):
 
 def test_committed_dropout_is_current(cfg, committed_runner, committed_lut):
     """A fresh computation from the committed bundle, LUT and frame-0 inputs gives the committed
-    `dropout.safetensors` bit for bit (the full regeneration check is
+    `dropout.safetensors` (bit for bit on the goldens' kernel family; the full regeneration check is
     `test_committed_goldens_are_current`)."""
     fresh = dropout_tensors(committed_runner, golden_frame(cfg, 0, MODELS_ROOT), committed_lut)
     dr = load_file(str(MODELS_ROOT / DROPOUT_FILE))
     assert set(fresh) == set(dr)
-    stale = [k for k in dr if fresh[k].dtype != dr[k].dtype or fresh[k].tobytes() != dr[k].tobytes()]
+    stale = stale_tensors(dr, fresh)
     assert not stale, f"stale dropout goldens (run `python -m satmap_ref.golden`): {stale}"
 
 
@@ -164,9 +172,9 @@ def test_staged_all_cameras_present_is_frame_000(cfg, committed_runner, committe
     f0 = load_file(str(GOLDEN / "frame_000.safetensors"))
     out = committed_runner.run_frame(golden_frame(cfg, 0, MODELS_ROOT), committed_lut,
                                      camera_ok=np.ones(6, dtype=bool))
-    for k in ("value", "gathered", "camera_bev", "class_logits", "points",
-              "degraded_class_logits", "degraded_points"):
-        assert out[k].tobytes() == f0[k].tobytes(), k
+    keys = ("value", "gathered", "camera_bev", "class_logits", "points",
+            "degraded_class_logits", "degraded_points")
+    assert not stale_tensors({k: f0[k] for k in keys}, {k: out[k] for k in keys})
 
 
 def test_staged_dropped_camera_image_is_not_used(cfg, committed_runner, committed_lut):
@@ -180,5 +188,18 @@ def test_staged_dropped_camera_image_is_not_used(cfg, committed_runner, committe
     dr = load_file(str(MODELS_ROOT / DROPOUT_FILE))
     out = committed_runner.run_frame(other, committed_lut, camera_ok=ok)
     assert not out["value"][3].any()
-    for k in ("gathered", "camera_bev", "class_logits", "points"):
-        assert out[k].tobytes() == dr[f"cam3_{k}"].tobytes(), k
+    keys = ("gathered", "camera_bev", "class_logits", "points")
+    assert not stale_tensors({k: dr[f"cam3_{k}"] for k in keys}, {k: out[k] for k in keys})
+
+
+def test_stale_tensors_is_exact_except_for_floats_across_kernel_families(monkeypatch):
+    import satmap_ref.golden as golden
+    a = {"f": np.ones(4, dtype=np.float32), "i": np.arange(4, dtype=np.int64)}
+    near = {"f": a["f"] + np.float32(1e-5), "i": a["i"].copy()}
+    for family, want in ((golden.GOLDEN_KERNEL_FAMILY, ["f"]), ("other", [])):
+        monkeypatch.setattr(golden, "kernel_family", lambda: family)
+        assert stale_tensors(a, near) == want
+        assert stale_tensors(a, {"f": a["f"] + np.float32(1e-3), "i": a["i"]}) == ["f"]
+        assert stale_tensors(a, {"f": a["f"], "i": a["i"] + 1}) == ["i"]
+        assert stale_tensors(a, {"f": a["f"].astype(np.float64), "i": a["i"]}) == ["f"]
+        assert stale_tensors(a, {"f": a["f"]}) == ["i"]
