@@ -133,9 +133,10 @@ fn channel_axes(model: &TypedModel) -> HashMap<String, usize> {
                 };
                 axis = if along_last { rank - 1 } else { rank - 2 };
             } else if let Some(conv) = user.op_as::<Conv>()
-                && conv.kernel_fmt != KernelFormat::OIHW
+                && consumer.slot == 1
+                && conv.kernel_fmt == KernelFormat::HWIO
             {
-                // HWIO: O last.
+                // O last; OIHW and OHWI have it first. (The writer's rewrites leave OIHW.)
                 axis = rank - 1;
             }
         }
