@@ -66,20 +66,11 @@ pub fn f32_weight_bytes(model: &TypedModel) -> usize {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_graphs::{dat_sizes, model_adding};
     use super::*;
-    use tract_nnef::tract_core::ops::math::add;
 
     fn weights() -> Vec<f32> {
         (0..64).map(|i| 0.1 + i as f32 / 3.0).collect()
-    }
-
-    fn model_adding(w: &[f32]) -> TractResult<TypedModel> {
-        let mut model = TypedModel::default();
-        let x = model.add_source("x", f32::fact([w.len()]))?;
-        let w = model.add_const("w", tensor1(w))?;
-        let y = model.wire_node("y", add(), &[x, w])?;
-        model.select_output_outlets(&y)?;
-        Ok(model)
     }
 
     /// x + w: the NNEF form stores w as f16 (bytes of its tensor file), reads back and, widened,
@@ -87,21 +78,11 @@ mod tests {
     #[test]
     fn weights_are_stored_as_f16_and_widened_at_load() -> TractResult<()> {
         let w = weights();
-        let half = to_f16(&model_adding(&w)?)?;
+        let half = to_f16(&model_adding(tensor1(&w))?)?;
         let nnef = tract_nnef::nnef();
         let tar = nnef.write_to_tar_with_config(&half, Vec::new(), false, true)?;
-        let mut archive = tar::Archive::new(tar.as_slice());
-        let dat: Vec<u64> = archive
-            .entries()?
-            .filter_map(Result::ok)
-            .filter(|e| {
-                e.path()
-                    .is_ok_and(|p| p.extension().is_some_and(|x| x == "dat"))
-            })
-            .map(|e| e.size())
-            .collect();
         // One tensor file: a 128-byte header and 64 two-byte elements.
-        assert_eq!(dat, [128 + 64 * 2]);
+        assert_eq!(dat_sizes(&tar)?, [128 + 64 * 2]);
         let back = nnef.model_for_read(&mut tar.as_slice())?;
         let widened = FloatPrecisionTranslator::new(f16::datum_type(), f32::datum_type())
             .transform_into(back)?;
@@ -120,7 +101,7 @@ mod tests {
     fn a_weight_outside_f16_range_is_refused() -> TractResult<()> {
         let mut w = weights();
         w[7] = 1e6;
-        let err = to_f16(&model_adding(&w)?).unwrap_err().to_string();
+        let err = to_f16(&model_adding(tensor1(&w))?).unwrap_err().to_string();
         assert!(err.contains("constant w"), "{err}");
         Ok(())
     }

@@ -272,8 +272,8 @@ fn quantize_per_channel(value: &Tensor, axis: usize) -> TractResult<(Tensor, Ten
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_graphs::{dat_sizes, model_adding};
     use super::*;
-    use tract_nnef::tract_core::ops::math::add;
 
     const ROWS: usize = 4;
     const COLS: usize = 64;
@@ -292,13 +292,8 @@ mod tests {
             .collect()
     }
 
-    fn model_adding(w: &[f32]) -> TractResult<TypedModel> {
-        let mut model = TypedModel::default();
-        let x = model.add_source("x", f32::fact([ROWS, COLS]))?;
-        let w = model.add_const("w", Tensor::from_shape(&[ROWS, COLS], w)?)?;
-        let y = model.wire_node("y", add(), &[x, w])?;
-        model.select_output_outlets(&y)?;
-        Ok(model)
+    fn weight_tensor(w: &[f32]) -> TractResult<Tensor> {
+        Tensor::from_shape(&[ROWS, COLS], w)
     }
 
     /// x + w: the tar stores w as int8 (one byte an element) and one scale per row, reads back
@@ -308,7 +303,7 @@ mod tests {
     fn weights_are_stored_as_int8_and_widened_at_load() -> TractResult<()> {
         let w = weights();
         let nnef = tract_nnef::nnef();
-        let (tar, stored) = write_tar(&nnef, &model_adding(&w)?)?;
+        let (tar, stored) = write_tar(&nnef, &model_adding(weight_tensor(&w)?)?)?;
         assert_eq!(
             stored,
             Int8Stored {
@@ -316,33 +311,25 @@ mod tests {
                 elements: ROWS * COLS
             }
         );
-        let mut archive = tar::Archive::new(tar.as_slice());
-        let mut dat: Vec<u64> = archive
-            .entries()?
-            .filter_map(Result::ok)
-            .filter(|e| {
-                e.path()
-                    .is_ok_and(|p| p.extension().is_some_and(|x| x == "dat"))
-            })
-            .map(|e| e.size())
-            .collect();
-        dat.sort_unstable();
         // A 128-byte header each: four f32 scales, 256 int8 weights.
-        assert_eq!(dat, [128 + ROWS as u64 * 4, 128 + (ROWS * COLS) as u64]);
+        assert_eq!(
+            dat_sizes(&tar)?,
+            [128 + ROWS as u64 * 4, 128 + (ROWS * COLS) as u64]
+        );
         let back = nnef.model_for_read(&mut tar.as_slice())?;
         let plan = back.into_optimized()?.into_runnable()?;
         let zeros = Tensor::zero::<f32>(&[ROWS, COLS])?;
         let out = plan.run(tvec![zeros.into_tvalue()])?;
         let got = out[0].try_as_plain_ram()?.as_slice::<f32>()?;
-        for (i, (g, w)) in got.iter().zip(&w).enumerate() {
-            let row = &weights()[i / COLS * COLS..][..COLS];
+        for (i, (g, v)) in got.iter().zip(&w).enumerate() {
+            let row = &w[i / COLS * COLS..][..COLS];
             let max_abs = row.iter().fold(0f32, |m, v| m.max(v.abs()));
             let s = if max_abs > 0.0 { max_abs / Q_MAX } else { 1.0 };
-            let want = (w / s).round() * s;
+            let want = (v / s).round() * s;
             assert_eq!(g.to_bits(), want.to_bits(), "element {i}");
             assert!(
-                (g - w).abs() <= s / 2.0 * (1.0 + 1e-6),
-                "element {i}: {g} vs {w}"
+                (g - v).abs() <= s / 2.0 * (1.0 + 1e-6),
+                "element {i}: {g} vs {v}"
             );
         }
         Ok(())
@@ -351,11 +338,7 @@ mod tests {
     /// A weight of rank 1 (a bias, a norm's gain) stays f32.
     #[test]
     fn rank_one_constants_stay_f32() -> TractResult<()> {
-        let mut model = TypedModel::default();
-        let x = model.add_source("x", f32::fact([COLS * 2]))?;
-        let b = model.add_const("b", tensor1(&[0.5f32; COLS * 2]))?;
-        let y = model.wire_node("y", add(), &[x, b])?;
-        model.select_output_outlets(&y)?;
+        let model = model_adding(tensor1(&[0.5f32; COLS * 2]))?;
         let (_, stored) = write_tar(&tract_nnef::nnef(), &model)?;
         assert_eq!(stored, Int8Stored::default());
         Ok(())

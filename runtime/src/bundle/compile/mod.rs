@@ -23,6 +23,8 @@
 
 pub mod f16_weights;
 pub mod int8_weights;
+#[cfg(test)]
+mod test_graphs;
 
 use std::time::Instant;
 
