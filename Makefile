@@ -96,7 +96,8 @@ $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 CAPI_LIB := target/debug/deps/libsatmap_capi.a
 C_REPLAY := target/c/replay
 # f32 results are bit-identical on one family of tract kernels, not across families (vector
-# widths change summation order): the digests are kept per family, as tests/common picks it.
+# widths change summation order): the digests are kept per family, the rule of
+# engine_tract::kernel_family (and satmap_ref.golden.kernel_family) read off /proc/cpuinfo.
 KERNEL_FAMILY := $(shell if grep -qw avx512f /proc/cpuinfo; then echo avx512f; \
   elif grep -qw avx2 /proc/cpuinfo && grep -qw fma /proc/cpuinfo; then echo fma; else echo generic; fi)
 C_REPLAY_ARGS := models/bundles/test.satmap models/calibration/nuscenes_like.toml examples/c/scenario.bin \

@@ -29,7 +29,9 @@ use crate::model_dims::ModelDims;
 /// `generic`. Outputs are bit-identical run to run on one family, not across families: the
 /// vector width changes matmul tiling and so summation order (measured: the demo drive's run
 /// digest and the C example's map digests differ between an AVX-512 Xeon and an AVX2 EPYC,
-/// values within 2e-5). Digests committed from a run are therefore kept per family.
+/// values within 2e-5). Digests committed from a run are therefore kept per family. The same rule
+/// is read off `/proc/cpuinfo` by the Makefile (the C example's digests) and by
+/// `satmap_ref.golden.kernel_family` (the Python goldens).
 #[must_use]
 pub fn kernel_family() -> &'static str {
     #[cfg(target_arch = "x86_64")]
