@@ -8,10 +8,14 @@ PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz
+.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers
 
+# The demo runs the binary `make test` builds (the same cargo command, so the dependency tree is
+# compiled once for both): the test profile, opt-level 3 for every crate, ours and tract's.
+# `cargo run -p satmap-sim` would resolve features for that one package and compile tract again.
 demo:
-	$(CARGO) run -p satmap-sim -- drive --out out/demo
+	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
+	target/debug/satmap-sim drive --out out/demo
 
 # The Python venv (pip, ~5 GB of wheels: network and disk, not CPU) installs in the background
 # while the Rust steps compile; its log is printed after them, and either failing fails `test`.
@@ -84,6 +88,21 @@ test-paper: $(PAPER_BUNDLE)/manifest.sha256
 $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 	cd models && .venv/bin/python -m satmap_ref.export --config paper --out build/paper
 
+# Our runtime, onnxruntime and PyTorch eager side by side (never run in CI; ~25 min): every stage
+# of test, nano and paper on each bundle's recorded inputs at 1 and 2 threads, FLOPs, the
+# machine's matmul peak, max RSS per engine; writes docs/perf.md and docs/perf.json. See
+# models/src/satmap_ref/peers.py. PEERS_FLAGS=--rounds 1 for a quick look.
+NANO_BUNDLE := models/build/nano
+PEERS_FLAGS ?= --rounds 3 --repeats 5
+bench-peers: $(NANO_BUNDLE)/manifest.sha256 $(PAPER_BUNDLE)/manifest.sha256
+	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
+	cd models && .venv/bin/python -m satmap_ref.peers --sim ../target/debug/satmap-sim \
+	  --bundle test=bundles/test --bundle nano=build/nano --bundle paper=build/paper \
+	  --threads 1 2 $(PEERS_FLAGS) --out ../docs/perf
+
+$(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
+	cd models && .venv/bin/python -m satmap_ref.export --config nano --out build/nano
+
 # The C API from C: builds the static library, compiles examples/c/replay.c with the system C
 # compiler (warnings are errors) and replays the committed scenario over static caller-owned
 # regions, natively (digests must equal the Rust run's, examples/c/expected-<family>.txt, checked by
@@ -97,8 +116,11 @@ CAPI_LIB := target/debug/deps/libsatmap_capi.a
 C_REPLAY := target/c/replay
 # f32 results are bit-identical on one family of tract kernels, not across families (vector
 # widths change summation order): the digests are kept per family, the rule of
-# engine_tract::kernel_family (and satmap_ref.golden.kernel_family) read off /proc/cpuinfo.
-KERNEL_FAMILY := $(shell if grep -qw avx512f /proc/cpuinfo; then echo avx512f; \
+# engine_tract::kernel_family (and satmap_ref.golden.kernel_family) read off /proc/cpuinfo:
+# <vendor>-<tier>, TRACT_X86_KIND overriding the vendor as it does in tract.
+KERNEL_VENDOR := $(if $(TRACT_X86_KIND),$(if $(filter intel amd,$(TRACT_X86_KIND)),$(TRACT_X86_KIND),other),$(shell if grep -qm1 GenuineIntel /proc/cpuinfo; then echo intel; \
+  elif grep -qm1 AuthenticAMD /proc/cpuinfo; then echo amd; else echo other; fi))
+KERNEL_FAMILY := $(KERNEL_VENDOR)-$(shell if grep -qw avx512f /proc/cpuinfo; then echo avx512f; \
   elif grep -qw avx2 /proc/cpuinfo && grep -qw fma /proc/cpuinfo; then echo fma; else echo generic; fi)
 C_REPLAY_ARGS := models/bundles/test.satmap models/calibration/nuscenes_like.toml examples/c/scenario.bin \
   examples/c/expected-$(KERNEL_FAMILY).txt

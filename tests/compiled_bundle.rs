@@ -545,6 +545,7 @@ fn maps_stay_close_to_f32(precision: Precision, bounds: &MapBounds) {
             max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
             show_progress: false,
             pack_compression: TileCompression::Raw,
+            threads: std::num::NonZeroUsize::MIN,
         };
         replay(&cfg, None).unwrap()
     };

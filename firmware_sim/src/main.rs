@@ -42,6 +42,8 @@ enum Command {
     CheckBundle(satmap_sim::cli::check_bundle::Args),
     /// Compile a folder bundle (ONNX stages) into the one-file NNEF bundle the ECU engine loads.
     Compile(satmap_sim::cli::compile::Args),
+    /// Time every stage and the step of a bundle on its reference inputs (JSON; `make bench-peers`).
+    BenchStages(satmap_sim::cli::bench_stages::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -58,6 +60,7 @@ fn main() -> std::process::ExitCode {
         Command::MemoryMap(args) => satmap_sim::cli::memory_map::run(&args),
         Command::CheckBundle(args) => satmap_sim::cli::check_bundle::run(&args),
         Command::Compile(args) => satmap_sim::cli::compile::run(&args),
+        Command::BenchStages(args) => satmap_sim::cli::bench_stages::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

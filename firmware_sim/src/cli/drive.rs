@@ -11,6 +11,7 @@
 //! [`crate::arena::EXIT_ARENA_EXHAUSTED`] (3) the arena ran out (the region is named on stderr);
 //! [`EXIT_BAD_INPUT`] (2) bad bundle, scenario, route pack or arguments; 1 a failed step.
 
+use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -91,6 +92,10 @@ pub struct Args {
     /// the top-k, and both runs' mAP.
     #[arg(long, value_name = "BUNDLE", conflicts_with = "satellite_only")]
     pub deviation_from: Option<PathBuf>,
+    /// Threads the graph engine runs on (a private pool; the maps are bit-identical for any
+    /// count).
+    #[arg(long, default_value = "1")]
+    pub threads: NonZeroUsize,
 }
 
 fn parse_crop(text: &str) -> Result<CropSpec, String> {
@@ -190,6 +195,7 @@ pub fn run(
         show_progress: !args.quiet && !args.json,
         max_degraded_share: args.max_degraded_share,
         pack_compression: args.pack_codec.compression(args.jpeg_quality),
+        threads: args.threads,
     };
     if let Some(pack_path) = &args.satellite_only {
         return run_satellite_only(args, pack_path, args.drive_hz);

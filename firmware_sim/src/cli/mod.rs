@@ -1,5 +1,6 @@
 //! One module per `satmap-sim` subcommand: its clap arguments and its `run` entry point.
 
+pub mod bench_stages;
 pub mod build_pack;
 pub mod check_bundle;
 pub mod compile;

@@ -36,6 +36,7 @@ pub mod timed_engine;
 pub mod timed_source;
 pub mod world_imagery;
 
+use std::num::NonZeroUsize;
 use std::path::PathBuf;
 
 use satmap_runtime::satellite::CropSpec;
@@ -89,6 +90,9 @@ pub struct ReplayConfig {
     /// How the harness stores the tiles of the pack it builds (synthetic drives and scenario
     /// folders without a pack): raw, or compressed and decoded into the `tile_pixels` region.
     pub pack_compression: TileCompression,
+    /// Threads the graph engine runs on (`TractEngine::set_threads`; the maps do not depend on
+    /// it).
+    pub threads: NonZeroUsize,
 }
 
 /// What the pictures of a replay are made from (the last step).

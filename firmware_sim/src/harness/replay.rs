@@ -128,10 +128,13 @@ pub fn replay(
     // ECU side: the graph engine, then the runtime's regions.
     let before_engine = stats_of(alloc);
     label(alloc, ArenaRegion::GraphEngine);
-    let engine = TractEngine::load(&bundle).map_err(|e| HarnessError::Bundle {
+    let mut engine = TractEngine::load(&bundle).map_err(|e| HarnessError::Bundle {
         path: cfg.bundle_dir.clone(),
         message: e.to_string(),
     })?;
+    engine
+        .set_threads(cfg.threads)
+        .map_err(|e| HarnessError::Settings(e.to_string()))?;
     let engine = TimedEngine::new(engine, frames, alloc);
     let after_engine = stats_of(alloc);
     label(alloc, ArenaRegion::RuntimeRegions);

@@ -15,6 +15,7 @@ other weights."""
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -38,8 +39,9 @@ DROPOUT_FILE = Path("golden") / GOLDEN_CONFIG / "dropout.safetensors"
 DROPOUT_KEYS = ("count", "gathered", "camera_bev", "class_logits", "points")
 # The CPU kernel family the committed goldens were computed on (`kernel_family`). onnxruntime's
 # float results are bit-identical within a family, not across (vector widths change summation
-# order): on an AVX2 EPYC frame 0's class logits come out 6.7e-6 from the AVX-512 Xeon's.
-GOLDEN_KERNEL_FAMILY = "avx512f"
+# order, and the vendor changes the kernels chosen): on an AVX2 EPYC frame 0's class logits come
+# out 6.7e-6 from the AVX-512 Xeon's, and an AVX-512 EPYC differs from both.
+GOLDEN_KERNEL_FAMILY = "intel-avx512f"
 # How far a float golden recomputed on another family may be from the committed one: half the
 # runtime's stage tolerance (1e-4), plus 1e-5 relative for metre-valued tensors; measured (AVX2
 # against AVX-512) up to 1.05e-5 on logits and 7.2e-5 on decoded points of ~30 m (2.4e-6).
@@ -50,18 +52,28 @@ CROSS_FAMILY_RTOL = 1e-5
 
 
 def kernel_family(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
-    """`avx512f`, `fma` (AVX2 and FMA) or `generic`: the same families as the runtime's
-    `engine_tract::kernel_family`, read off the CPU flags."""
+    """`<vendor>-<tier>`: vendor `intel`, `amd` or `other` (`TRACT_X86_KIND` overrides it),
+    tier `avx512f`, `fma` (AVX2 and FMA) or `generic`; the same families as the runtime's
+    `engine_tract::kernel_family`, read off `/proc/cpuinfo`."""
     try:
-        flags = set(next((ln for ln in cpuinfo.read_text().splitlines()
-                          if ln.startswith("flags")), "").split())
+        lines = cpuinfo.read_text().splitlines()
     except OSError:
-        return "generic"
+        lines = []
+    flags = set(next((ln for ln in lines if ln.startswith("flags")), "").split())
+    vendor_id = next((ln.split(":", 1)[1].strip() for ln in lines
+                      if ln.startswith("vendor_id")), "")
+    kind = os.environ.get("TRACT_X86_KIND")
+    if kind is not None:
+        vendor = kind if kind in ("intel", "amd") else "other"
+    else:
+        vendor = {"GenuineIntel": "intel", "AuthenticAMD": "amd"}.get(vendor_id, "other")
     if "avx512f" in flags:
-        return "avx512f"
-    if {"avx2", "fma"} <= flags:
-        return "fma"
-    return "generic"
+        tier = "avx512f"
+    elif {"avx2", "fma"} <= flags:
+        tier = "fma"
+    else:
+        tier = "generic"
+    return f"{vendor}-{tier}"
 
 
 def stale_tensors(committed: dict[str, np.ndarray], fresh: dict[str, np.ndarray]) -> list[str]:

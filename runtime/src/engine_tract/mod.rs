@@ -10,13 +10,16 @@
 //! memory once and allocates nothing on our side; tract's own intermediate tensors are the
 //! graph engine's allocations.
 //!
-//! Threads: tract runs single-threaded here (the `multithread-mm` feature of `tract-linalg` is
-//! off), which keeps every matmul's summation order fixed and the outputs bit-identical across
-//! runs. Turning that feature on and passing a multithread executor in the run options splits
-//! matmuls across threads; tract's kernels partition output tiles, not reductions, so results
-//! stay bit-identical, but we have measured only a 1.24x gain on 2 cores and keep it off.
+//! Threads: one by default. [`TractEngine::set_threads`] gives the engine a private pool of N
+//! threads (never rayon's global pool, whose size the process does not control) and every run
+//! executes inside it: tract's matmuls split over output tiles and its row kernels over rows,
+//! each reduction stays serial on one thread, so the outputs are bit-identical for any N
+//! (`tests/threads.rs` asserts it over a replay).
 
+use std::num::NonZeroUsize;
 use std::sync::Arc;
+
+use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
 use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
@@ -25,25 +28,67 @@ use crate::bundle::{Bundle, BundleError, DType, GraphFormat, Precision, StageEnt
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
-/// The family of f32 kernels tract 0.23.9 picks on this CPU: `avx512f`, `fma` (AVX2 and FMA) or
-/// `generic`. Outputs are bit-identical run to run on one family, not across families: the
-/// vector width changes matmul tiling and so summation order (measured: the demo drive's run
-/// digest and the C example's map digests differ between an AVX-512 Xeon and an AVX2 EPYC,
-/// values within 2e-5). Digests committed from a run are therefore kept per family. The same rule
-/// is read off `/proc/cpuinfo` by the Makefile (the C example's digests) and by
+/// The family of f32 kernels tract 0.23.9 picks on this CPU, `<vendor>-<tier>`: vendor `intel`,
+/// `amd` or `other` (tract keeps one matmul cost model per vendor, so the same instruction set
+/// gets other tiles on another vendor), tier `avx512f`, `fma` (AVX2 and FMA) or `generic`
+/// (`generic` alone off x86-64). `TRACT_X86_KIND=intel|amd|other` overrides the vendor, as it does
+/// in tract. Outputs are bit-identical run to run and across thread counts within a family, not
+/// across families: the tiling changes the summation order (measured: the demo drive's run
+/// digest differs between an AVX-512 Xeon, an AVX-512 EPYC and an AVX2 EPYC, values within
+/// 2e-5). Digests committed from a run are therefore kept per family. The same rule is read off
+/// `/proc/cpuinfo` by the Makefile (the C example's digests) and by
 /// `satmap_ref.golden.kernel_family` (the Python goldens).
 #[must_use]
 pub fn kernel_family() -> &'static str {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::is_x86_feature_detected!("avx512f") {
-            return "avx512f";
-        }
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-            return "fma";
+        let vendor = match std::env::var("TRACT_X86_KIND").ok().as_deref() {
+            Some("intel") => "intel",
+            Some("amd") => "amd",
+            Some(_) => "other",
+            None => cpuid_vendor(),
+        };
+        let tier = if std::is_x86_feature_detected!("avx512f") {
+            "avx512f"
+        } else if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            "fma"
+        } else {
+            "generic"
+        };
+        match (vendor, tier) {
+            ("intel", "avx512f") => "intel-avx512f",
+            ("intel", "fma") => "intel-fma",
+            ("intel", _) => "intel-generic",
+            ("amd", "avx512f") => "amd-avx512f",
+            ("amd", "fma") => "amd-fma",
+            ("amd", _) => "amd-generic",
+            (_, "avx512f") => "other-avx512f",
+            (_, "fma") => "other-fma",
+            _ => "other-generic",
         }
     }
-    "generic"
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        "generic"
+    }
+}
+
+/// The CPU vendor as CPUID leaf 0 spells it, in [`kernel_family`]'s words.
+#[cfg(target_arch = "x86_64")]
+fn cpuid_vendor() -> &'static str {
+    // SAFETY-free on x86-64: CPUID leaf 0 exists on every x86-64 CPU (`unsafe` only on older
+    // toolchains, hence the allow).
+    #[allow(unused_unsafe)]
+    let id = unsafe { std::arch::x86_64::__cpuid(0) };
+    let mut s = [0u8; 12];
+    s[0..4].copy_from_slice(&id.ebx.to_le_bytes());
+    s[4..8].copy_from_slice(&id.edx.to_le_bytes());
+    s[8..12].copy_from_slice(&id.ecx.to_le_bytes());
+    match &s {
+        b"GenuineIntel" => "intel",
+        b"AuthenticAMD" => "amd",
+        _ => "other",
+    }
 }
 
 /// One loaded stage: its plan's reused state and its input tensors.
@@ -134,7 +179,7 @@ impl StageRunner {
     }
 
     /// Run the stage and copy each f32 output into the matching buffer of `outs`.
-    fn run(&mut self, outs: &mut [&mut [f32]]) -> Result<(), EngineError> {
+    fn run(&mut self, executor: &Executor, outs: &mut [&mut [f32]]) -> Result<(), EngineError> {
         if outs.len() != self.output_lens.len() {
             return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
         }
@@ -151,7 +196,8 @@ impl StageRunner {
             .iter()
             .map(|t| TValue::from_const(Arc::clone(t)))
             .collect();
-        let results = match self.state.run(inputs) {
+        let state = &mut self.state;
+        let results = match multithread_tract_scope(executor.clone(), || state.run(inputs)) {
             Ok(results) => results,
             Err(e) => {
                 self.last_error = Some(format!("{e:#}"));
@@ -377,6 +423,18 @@ pub(crate) fn check_graph_io(
 pub struct TractEngine {
     dims: ModelDims,
     runners: Vec<StageRunner>,
+    executor: Executor,
+    threads: NonZeroUsize,
+}
+
+/// The engine's thread pool could not be started (the OS refused a thread).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot start a pool of {threads} engine threads: {reason}")]
+pub struct ThreadPoolError {
+    /// Threads asked for.
+    pub threads: usize,
+    /// The operating system's reason.
+    pub reason: String,
 }
 
 impl core::fmt::Debug for TractEngine {
@@ -399,7 +457,40 @@ impl TractEngine {
         Ok(Self {
             dims: bundle.dims().clone(),
             runners,
+            executor: Executor::SingleThread,
+            threads: NonZeroUsize::MIN,
         })
+    }
+
+    /// Run every later stage on `threads` threads: 1 is the calling thread alone; more start a
+    /// private pool of `threads` workers named `satmap-engine-<i>` (the calling thread waits
+    /// while they run). The outputs do not depend on the count. On error the engine keeps its
+    /// previous setting and stays usable.
+    ///
+    /// # Errors
+    /// [`ThreadPoolError`] when the operating system refuses a thread.
+    pub fn set_threads(&mut self, threads: NonZeroUsize) -> Result<(), ThreadPoolError> {
+        self.executor = if threads.get() == 1 {
+            Executor::SingleThread
+        } else {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.get())
+                .thread_name(|i| format!("satmap-engine-{i}"))
+                .build()
+                .map_err(|e| ThreadPoolError {
+                    threads: threads.get(),
+                    reason: e.to_string(),
+                })?;
+            Executor::MultiThread(Arc::new(pool))
+        };
+        self.threads = threads;
+        Ok(())
+    }
+
+    /// Threads the stages run on (see [`TractEngine::set_threads`]).
+    #[must_use]
+    pub fn threads(&self) -> NonZeroUsize {
+        self.threads
     }
 
     /// Open the bundle at `path` (a compiled bundle file or a folder) and load it.
@@ -413,9 +504,10 @@ impl TractEngine {
         self.runners.get(stage as usize)?.last_error.as_deref()
     }
 
-    fn runner(&mut self, stage: Stage) -> &mut StageRunner {
+    /// The stage's runner and the executor it runs in.
+    fn runner(&mut self, stage: Stage) -> (&mut StageRunner, &Executor) {
         // Stage::ALL order is the load order, so the index is the stage's position.
-        &mut self.runners[stage as usize]
+        (&mut self.runners[stage as usize], &self.executor)
     }
 }
 
@@ -430,12 +522,12 @@ impl Engine for TractEngine {
         image_rgb: &[u8],
         value_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        let r = self.runner(Stage::ImageEncoder);
+        let (r, executor) = self.runner(Stage::ImageEncoder);
         r.write_input(0, image_rgb)?;
         let index =
             i64::try_from(camera).map_err(|_| r.err(EngineErrorKind::CameraIndex { camera }))?;
         r.write_input(1, &[index])?;
-        r.run(&mut [value_out])
+        r.run(executor, &mut [value_out])
     }
 
     fn bev_query(
@@ -444,9 +536,9 @@ impl Engine for TractEngine {
         query_out: &mut [f32],
         gkt_weights_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        let r = self.runner(Stage::BevQuery);
+        let (r, executor) = self.runner(Stage::BevQuery);
         r.write_input(0, can_bus)?;
-        r.run(&mut [query_out, gkt_weights_out])
+        r.run(executor, &mut [query_out, gkt_weights_out])
     }
 
     fn bev_encode(
@@ -455,10 +547,10 @@ impl Engine for TractEngine {
         gathered: &[f32],
         camera_bev_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        let r = self.runner(Stage::BevEncoder);
+        let (r, executor) = self.runner(Stage::BevEncoder);
         r.write_input(0, query)?;
         r.write_input(1, gathered)?;
-        r.run(&mut [camera_bev_out])
+        r.run(executor, &mut [camera_bev_out])
     }
 
     fn encode_satellite(
@@ -466,9 +558,9 @@ impl Engine for TractEngine {
         crop_rgb: &[u8],
         satellite_bev_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        let r = self.runner(Stage::SatelliteEncoder);
+        let (r, executor) = self.runner(Stage::SatelliteEncoder);
         r.write_input(0, crop_rgb)?;
-        r.run(&mut [satellite_bev_out])
+        r.run(executor, &mut [satellite_bev_out])
     }
 
     fn decode_map(
@@ -478,9 +570,9 @@ impl Engine for TractEngine {
         class_logits_out: &mut [f32],
         points_out: &mut [f32],
     ) -> Result<(), EngineError> {
-        let r = self.runner(Stage::MapDecoder);
+        let (r, executor) = self.runner(Stage::MapDecoder);
         r.write_input(0, camera_bev)?;
         r.write_input(1, satellite_bev)?;
-        r.run(&mut [class_logits_out, points_out])
+        r.run(executor, &mut [class_logits_out, points_out])
     }
 }

@@ -1,0 +1,200 @@
+//! `satmap-sim bench-stages`: our side of `make bench-peers` (`satmap_ref.peers`). Times every
+//! stage of a bundle through the tract engine on the inputs recorded in its
+//! `reference.safetensors` (the same inputs onnxruntime and PyTorch are timed on), then the
+//! whole step where the built-in memory layout holds the model, and prints one JSON object:
+//! per-stage wall times of every repeat, the step's, the engine's threads, the CPU's kernel
+//! family and the process's peak resident set. A tool a person runs, never a test: it measures
+//! wall time on whatever else the machine is doing.
+
+use std::num::NonZeroUsize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use glam::{DVec2, Vec3};
+use safetensors::SafeTensors;
+use satmap_runtime::calibration::from_toml_file;
+use satmap_runtime::engine::{Engine, Stage};
+use satmap_runtime::engine_tract::{TractEngine, kernel_family};
+use satmap_runtime::satellite::FixedCrop;
+use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
+use serde::Serialize;
+
+use crate::cli::check_bundle::reference_f32s;
+
+/// Arguments of `bench-stages`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// A folder bundle, or a compiled `<name>.satmap` (its inputs are then read from
+    /// `<name>/reference.safetensors`).
+    #[arg(long)]
+    pub bundle: PathBuf,
+    /// Threads the engine runs on.
+    #[arg(long, default_value = "1")]
+    pub threads: NonZeroUsize,
+    /// Timed runs of each stage (after one untimed warm-up run).
+    #[arg(long, default_value_t = 5)]
+    pub repeats: usize,
+    /// Calibration of the whole-step runs.
+    #[arg(long, default_value = "models/calibration/nuscenes_like.toml")]
+    pub calibration: PathBuf,
+}
+
+/// What `bench-stages` prints.
+#[derive(Debug, Serialize)]
+pub struct StageTimes {
+    /// `"satmap"`.
+    pub engine: &'static str,
+    /// Threads the engine ran on.
+    pub threads: usize,
+    /// tract's kernel family on this CPU (`engine_tract::kernel_family`).
+    pub kernel_family: &'static str,
+    /// `(stage, wall time of each repeat in ms)`, in pipeline order.
+    pub stages_ms: Vec<(&'static str, Vec<f64>)>,
+    /// Wall time of each whole step (six cameras), ms; empty with `step_skipped` when the
+    /// built-in memory layout cannot hold the model.
+    pub step_ms: Vec<f64>,
+    /// Why the step was not timed.
+    pub step_skipped: Option<String>,
+    /// Peak resident set of this process (`VmHWM`), KiB.
+    pub max_rss_kib: u64,
+}
+
+fn reference_path(bundle: &Path) -> PathBuf {
+    if bundle.is_dir() {
+        bundle.join("reference.safetensors")
+    } else {
+        bundle.with_extension("").join("reference.safetensors")
+    }
+}
+
+/// `VmHWM` of `/proc/self/status`, KiB (0 where the kernel does not report it).
+fn max_rss_kib() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        })
+        .unwrap_or(0)
+}
+
+fn time_ms(repeats: usize, mut run: impl FnMut() -> Result<()>) -> Result<Vec<f64>> {
+    run()?;
+    (0..repeats)
+        .map(|_| {
+            let t = Instant::now();
+            run()?;
+            Ok(t.elapsed().as_secs_f64() * 1e3)
+        })
+        .collect()
+}
+
+/// Time the stages and the step.
+///
+/// # Errors
+/// The bundle or its reference unreadable, a stage failing, or no repeats asked for.
+pub fn measure(args: &Args) -> Result<StageTimes> {
+    if args.repeats == 0 {
+        bail!("--repeats must be at least 1");
+    }
+    let mut engine = TractEngine::open(&args.bundle)?;
+    engine.set_threads(args.threads)?;
+    let path = reference_path(&args.bundle);
+    let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+    let st = SafeTensors::deserialize(&bytes).with_context(|| path.display().to_string())?;
+    let d = engine.dims().clone();
+    let raw = |name: &str| -> Result<Vec<u8>> {
+        Ok(st
+            .tensor(name)
+            .with_context(|| format!("{}: no {name}", path.display()))?
+            .data()
+            .to_vec())
+    };
+    let image = raw("image_encoder.image")?;
+    let crop = raw("satellite_encoder.satellite")?;
+    let can_bus: [f32; 18] = reference_f32s(&st, "bev_query.can_bus", 18)?
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("can_bus is not 18 values"))?;
+    let query = reference_f32s(&st, "bev_encoder.bev_query", d.bev_len())?;
+    let gathered = reference_f32s(&st, "bev_encoder.gathered", d.bev_len())?;
+    let camera_bev = reference_f32s(&st, "map_decoder.camera_bev", d.bev_len())?;
+    let satellite_bev = reference_f32s(&st, "map_decoder.satellite_bev", d.bev_len())?;
+
+    let mut value = vec![0.0; d.value_len()];
+    let mut q = vec![0.0; d.bev_len()];
+    let mut w = vec![0.0; d.weights_len()];
+    let mut bev = vec![0.0; d.bev_len()];
+    let mut logits = vec![0.0; d.logits_len()];
+    let mut points = vec![0.0; d.points_len()];
+    let n = args.repeats;
+    let mut stages_ms = Vec::new();
+    for stage in Stage::ALL {
+        let e = &mut engine;
+        let times = match stage {
+            Stage::ImageEncoder => time_ms(n, || Ok(e.encode_image(0, &image, &mut value)?))?,
+            Stage::BevQuery => time_ms(n, || Ok(e.bev_query(&can_bus, &mut q, &mut w)?))?,
+            Stage::BevEncoder => time_ms(n, || Ok(e.bev_encode(&query, &gathered, &mut bev)?))?,
+            Stage::SatelliteEncoder => time_ms(n, || Ok(e.encode_satellite(&crop, &mut bev)?))?,
+            Stage::MapDecoder => time_ms(n, || {
+                Ok(e.decode_map(&camera_bev, &satellite_bev, &mut logits, &mut points)?)
+            })?,
+        };
+        stages_ms.push((stage.name(), times));
+    }
+
+    let calibration = from_toml_file(&args.calibration)?;
+    let threads = engine.threads().get();
+    let (step_ms, step_skipped) = match SatMap::new(engine, &calibration, FixedCrop(&crop)) {
+        Ok(mut map) => {
+            let (width_px, height_px) = (d.image_w as u32, d.image_h as u32);
+            let mut sequence = 0u64;
+            let times = time_ms(n, || {
+                sequence += 1;
+                let frame = Frame {
+                    sequence,
+                    timestamp_us: sequence * 100_000,
+                    pose: EgoPose::new(DVec2::ZERO, 0.3),
+                    motion: EgoMotion {
+                        acceleration_mps2: Vec3::new(0.1, 0.4, 0.0),
+                        rotation_rate_radps: Vec3::new(0.0, 0.0, 0.05),
+                        velocity_mps: Vec3::new(0.0, 10.0, 0.0),
+                    },
+                    images: core::array::from_fn(|_| {
+                        Some(CameraImage {
+                            width_px,
+                            height_px,
+                            rgb: &image,
+                            capture_us: 0,
+                            valid: true,
+                        })
+                    }),
+                };
+                map.step(&frame)?;
+                Ok(())
+            })?;
+            (times, None)
+        }
+        Err(e) => (Vec::new(), Some(e.to_string())),
+    };
+    Ok(StageTimes {
+        engine: "satmap",
+        threads,
+        kernel_family: kernel_family(),
+        stages_ms,
+        step_ms,
+        step_skipped,
+        max_rss_kib: max_rss_kib(),
+    })
+}
+
+/// Measure and print the JSON object.
+///
+/// # Errors
+/// As [`measure`].
+pub fn run(args: &Args) -> Result<()> {
+    let times = measure(args)?;
+    println!("{}", serde_json::to_string(&times)?);
+    Ok(())
+}

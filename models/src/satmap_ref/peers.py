@@ -1,0 +1,327 @@
+"""`make bench-peers`: the same stages on the same inputs through our runtime (`satmap-sim
+bench-stages`), onnxruntime and PyTorch eager, side by side, at each thread count.
+
+Every engine runs in a process of its own (so its peak resident set is its own), the engines
+alternate round by round (so a slow spell of this shared machine hits them all), and each
+stage's figure is the median of every timed repeat of every round. The inputs are the bundle's
+`reference.safetensors` (one recorded frame); ONNX files are the bundle's own; PyTorch runs the
+stage modules the export traced, with the bundle's weights. FLOPs per stage come from the
+reference (`stage_table`: matmul/conv FLOPs, 2 per multiply-add); the peak is the best of a
+large f32 matmul through NumPy's BLAS and through PyTorch's at the same thread count.
+
+Output: `<out>.md` (the tables) and `<out>.json` (every figure). A command a person runs, never
+a test: it measures wall time.
+
+CLI: `python -m satmap_ref.peers --sim ../target/release/satmap-sim --bundle test=bundles/test
+--bundle nano=build/nano --threads 1 2 --out ../docs/perf`; `python -m satmap_ref.peers worker
+...` is one engine's process."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .model import STAGE_NAMES
+
+ENGINES = ("satmap", "onnxruntime", "pytorch")
+PEAK_N = 2048
+MODELS_ROOT = Path(__file__).resolve().parents[2]
+# The weights each bundle was exported with: the committed trained default, else the seeded
+# initialisation (`export --seed 0`).
+DEFAULT_WEIGHTS = {"test": MODELS_ROOT / "weights" / "test_sat.safetensors"}
+
+
+def _thread_env(threads: int) -> dict[str, str]:
+    env = dict(os.environ)
+    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        env[k] = str(threads)
+    return env
+
+
+def _reference(bundle: Path) -> dict:
+    from safetensors.numpy import load_file
+    return load_file(str(bundle / "reference.safetensors"))
+
+
+def _time(repeats: int, fn) -> list[float]:
+    fn()
+    out = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        out.append((time.perf_counter() - t) * 1e3)
+    return out
+
+
+def _max_rss_kib() -> int:
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
+def worker_onnxruntime(bundle: Path, threads: int, repeats: int) -> dict:
+    import onnxruntime as ort
+    ref = _reference(bundle)
+    stages = []
+    for name in STAGE_NAMES:
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = threads
+        so.inter_op_num_threads = 1
+        so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        sess = ort.InferenceSession(str(bundle / f"{name}.onnx"), so,
+                                    providers=["CPUExecutionProvider"])
+        feeds = {i.name: ref[f"{name}.{i.name}"] for i in sess.get_inputs()}
+        stages.append((name, _time(repeats, lambda: sess.run(None, feeds))))
+    return {"engine": "onnxruntime", "version": ort.__version__, "threads": threads,
+            "stages_ms": stages, "max_rss_kib": _max_rss_kib()}
+
+
+def worker_pytorch(bundle: Path, config: str, weights: Path | None, threads: int,
+                   repeats: int) -> dict:
+    import torch
+    torch.set_num_threads(threads)
+    torch.set_num_interop_threads(1)
+    from .config import get_config
+    from .export import example_inputs, load_weights
+    from .model import build_model
+    cfg = get_config(config)
+    model = build_model(cfg, 0)
+    if weights is not None:
+        load_weights(model, weights)
+    model.eval()
+    ref = _reference(bundle)
+    stages = []
+    with torch.inference_mode():
+        for name in STAGE_NAMES:
+            stage = model.stages[name]
+            from .export import stage_io
+            ins, _ = stage_io(cfg)[name]
+            args = tuple(torch.from_numpy(ref[f"{name}.{n}"].copy()) for n, _, _ in ins)
+            assert len(args) == len(example_inputs(cfg, name))
+            stages.append((name, _time(repeats, lambda: stage(*args))))
+    return {"engine": "pytorch", "version": torch.__version__, "threads": threads,
+            "stages_ms": stages, "max_rss_kib": _max_rss_kib()}
+
+
+def worker_peak(threads: int, repeats: int) -> dict:
+    """GFLOP/s of a PEAK_N^3 f32 matmul, NumPy's BLAS and PyTorch's, best repeat each."""
+    import numpy as np
+    import torch
+    torch.set_num_threads(threads)
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((PEAK_N, PEAK_N), dtype=np.float32)
+    b = rng.standard_normal((PEAK_N, PEAK_N), dtype=np.float32)
+    ta, tb = torch.from_numpy(a), torch.from_numpy(b)
+    flop = 2.0 * PEAK_N ** 3
+    np_ms = min(_time(repeats, lambda: a @ b))
+    torch_ms = min(_time(repeats, lambda: torch.mm(ta, tb)))
+    return {"threads": threads, "n": PEAK_N, "numpy_gflops": flop / np_ms / 1e6,
+            "pytorch_gflops": flop / torch_ms / 1e6,
+            "gflops": max(flop / np_ms, flop / torch_ms) / 1e6}
+
+
+def stage_flops(config: str) -> dict[str, int]:
+    from .config import get_config
+    from .export import example_inputs, set_deterministic
+    from .model import build_model
+    from .stage_table import _flops
+    set_deterministic()
+    cfg = get_config(config)
+    model = build_model(cfg, 0)
+    return {n: _flops(model.stages[n], example_inputs(cfg, n)) for n in STAGE_NAMES}
+
+
+def _run_json(cmd: list[str], threads: int) -> dict:
+    p = subprocess.run(cmd, env=_thread_env(threads), capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({p.returncode}):\n{p.stderr}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def _engine_cmd(engine: str, sim: Path, spec: dict, threads: int, repeats: int) -> list[str]:
+    if engine == "satmap":
+        return [str(sim), "bench-stages", "--bundle", str(spec["bundle"]), "--threads",
+                str(threads), "--repeats", str(repeats), "--calibration",
+                str(MODELS_ROOT / "calibration" / "nuscenes_like.toml")]
+    cmd = [sys.executable, "-m", "satmap_ref.peers", "worker", "--engine", engine, "--bundle",
+           str(spec["bundle"]), "--config", spec["config"], "--threads", str(threads),
+           "--repeats", str(repeats)]
+    if spec["weights"] is not None:
+        cmd += ["--weights", str(spec["weights"])]
+    return cmd
+
+
+def _median(xs: list[float]) -> float:
+    return statistics.median(xs) if xs else float("nan")
+
+
+def _config_of(bundle: Path) -> str:
+    import tomllib
+    return tomllib.loads((bundle / "manifest.toml").read_text())["model"]["config"]
+
+
+def run(sim: Path, specs: list[dict], threads: list[int], rounds: int, repeats: int,
+        log=print) -> dict:
+    result = {"machine": _machine(), "peak": {}, "bundles": {}}
+    for t in threads:
+        result["peak"][t] = _run_json([sys.executable, "-m", "satmap_ref.peers", "worker",
+                                       "--engine", "peak", "--threads", str(t), "--repeats",
+                                       "5"], t)
+        log(f"peak at {t} thread(s): {result['peak'][t]['gflops']:.1f} GFLOP/s")
+    for spec in specs:
+        name = spec["name"]
+        entry = {"config": spec["config"], "flops": stage_flops(spec["config"]), "threads": {}}
+        for t in threads:
+            pooled = {e: {} for e in ENGINES}
+            extra = {e: {"max_rss_kib": 0} for e in ENGINES}
+            step = []
+            for r in range(rounds):
+                order = ENGINES[r % 3:] + ENGINES[:r % 3]
+                for engine in order:
+                    out = _run_json(_engine_cmd(engine, sim, spec, t, repeats), t)
+                    for stage, ms in out["stages_ms"]:
+                        pooled[engine].setdefault(stage, []).extend(ms)
+                    extra[engine]["max_rss_kib"] = max(extra[engine]["max_rss_kib"],
+                                                       out["max_rss_kib"])
+                    for k in ("version", "kernel_family", "step_skipped"):
+                        if out.get(k) is not None:
+                            extra[engine][k] = out[k]
+                    if engine == "satmap":
+                        step.extend(out["step_ms"])
+                    log(f"{name} threads {t} round {r + 1}/{rounds}: {engine} done")
+            entry["threads"][t] = {
+                "median_ms": {e: {s: _median(v) for s, v in pooled[e].items()} for e in ENGINES},
+                "samples_ms": pooled,
+                "satmap_step_median_ms": _median(step) if step else None,
+                "engines": extra,
+            }
+        result["bundles"][name] = entry
+    return result
+
+
+def _machine() -> dict:
+    model = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    from .golden import kernel_family
+    return {"cpu": model, "cores": os.cpu_count(), "kernel_family": kernel_family(),
+            "python": platform.python_version()}
+
+
+def _step_sum(med: dict[str, float]) -> float:
+    """A frame's stage time: six cameras' image encoders plus the other stages once."""
+    return sum(med[s] * (6 if s == "image_encoder" else 1) for s in STAGE_NAMES)
+
+
+def markdown(result: dict, command: str) -> str:
+    m = result["machine"]
+    lines = [
+        "# Speed against onnxruntime and PyTorch (`make bench-peers`)",
+        "",
+        f"Written by `{command}` on {m['cpu']} ({m['cores']} cores, tract kernel family "
+        f"`{m['kernel_family']}`). Medians of every timed repeat of every round, milliseconds; "
+        "every engine in its own process, engines alternating. Inputs: each bundle's "
+        "`reference.safetensors`. GFLOP: matmul/conv FLOPs of the reference stage. "
+        "'% peak' = achieved GFLOP/s over the best large f32 matmul at that thread count. "
+        "'x ORT' = our time over onnxruntime's (below 1 is faster).",
+        "",
+    ]
+    for t, p in result["peak"].items():
+        lines.append(f"- Peak at {t} thread(s): {p['gflops']:.1f} GFLOP/s "
+                     f"(NumPy BLAS {p['numpy_gflops']:.1f}, PyTorch {p['pytorch_gflops']:.1f}; "
+                     f"{p['n']}^3 f32 matmul).")
+    lines.append("")
+    for name, b in result["bundles"].items():
+        for t, r in b["threads"].items():
+            peak = result["peak"][t]["gflops"]
+            med = r["median_ms"]
+            lines += [f"## {name} (config `{b['config']}`), {t} thread(s)", "",
+                      "| stage | GFLOP | ours ms | ORT ms | PyTorch ms | x ORT | x PyTorch | "
+                      "% peak ours / ORT / PyTorch |",
+                      "|---|---|---|---|---|---|---|---|"]
+            for s in STAGE_NAMES:
+                gf = b["flops"][s] / 1e9
+                o, x, y = med["satmap"][s], med["onnxruntime"][s], med["pytorch"][s]
+                pct = " / ".join(f"{100 * gf / (v / 1e3) / peak:.0f}%" for v in (o, x, y))
+                lines.append(f"| {s} | {gf:.3f} | {o:.2f} | {x:.2f} | {y:.2f} | {o / x:.2f} | "
+                             f"{o / y:.2f} | {pct} |")
+            sums = [_step_sum(med[e]) for e in ENGINES]
+            step = r["satmap_step_median_ms"]
+            step_txt = f"{step:.1f}" if step is not None else "n/a"
+            lines.append(f"| frame: 6 x image_encoder + the rest | | {sums[0]:.1f} | "
+                         f"{sums[1]:.1f} | {sums[2]:.1f} | {sums[0] / sums[1]:.2f} | "
+                         f"{sums[0] / sums[2]:.2f} | |")
+            skipped = r["engines"]["satmap"].get("step_skipped")
+            lines.append(f"| our whole step (`SatMap::step`, gather and decode included) | | "
+                         f"{step_txt} | | | | | |")
+            rss = " / ".join(f"{r['engines'][e]['max_rss_kib'] / 1024:.0f}" for e in ENGINES)
+            lines += ["", f"Max RSS per process, MiB (ours / ORT / PyTorch): {rss}."]
+            if skipped:
+                lines.append(f"Whole step not timed: {skipped}.")
+            lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def _parse_bundle(spec: str) -> dict:
+    name, rest = spec.split("=", 1)
+    bundle, _, weights = rest.partition(":")
+    bundle_path = Path(bundle).resolve()
+    config = _config_of(bundle_path)
+    w = Path(weights).resolve() if weights else DEFAULT_WEIGHTS.get(config)
+    return {"name": name, "bundle": bundle_path, "config": config, "weights": w}
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "worker":
+        ap = argparse.ArgumentParser(prog="satmap_ref.peers worker")
+        ap.add_argument("--engine", required=True, choices=("onnxruntime", "pytorch", "peak"))
+        ap.add_argument("--bundle", type=Path)
+        ap.add_argument("--config")
+        ap.add_argument("--weights", type=Path)
+        ap.add_argument("--threads", type=int, required=True)
+        ap.add_argument("--repeats", type=int, required=True)
+        a = ap.parse_args(argv[1:])
+        if a.engine == "onnxruntime":
+            out = worker_onnxruntime(a.bundle, a.threads, a.repeats)
+        elif a.engine == "pytorch":
+            out = worker_pytorch(a.bundle, a.config, a.weights, a.threads, a.repeats)
+        else:
+            out = worker_peak(a.threads, a.repeats)
+        print(json.dumps(out))
+        return
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sim", type=Path, required=True, help="the satmap-sim binary")
+    ap.add_argument("--bundle", action="append", required=True,
+                    help="NAME=DIR[:WEIGHTS] of an exported folder bundle (repeatable)")
+    ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=5, help="timed runs per stage per process")
+    ap.add_argument("--out", type=Path, required=True, help="path stem: writes .md and .json")
+    a = ap.parse_args(argv)
+    specs = [_parse_bundle(s) for s in a.bundle]
+    result = run(a.sim.resolve(), specs, a.threads, a.rounds, a.repeats,
+                 log=lambda s: print(s, file=sys.stderr, flush=True))
+    command = "python -m satmap_ref.peers " + " ".join(argv)
+    result["command"] = command
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
+    a.out.with_suffix(".md").write_text(markdown(result, command))
+    print(f"wrote {a.out.with_suffix('.md')} and {a.out.with_suffix('.json')}")
+
+
+if __name__ == "__main__":
+    main()
