@@ -35,6 +35,10 @@ pub struct Args {
     /// Timed runs of each stage (after one untimed warm-up run).
     #[arg(long, default_value_t = 5)]
     pub repeats: usize,
+    /// Also time every stage once node by node and report the time per operator kind
+    /// (`ops_ms`; the per-node timer adds overhead, so these are shares, not stage times).
+    #[arg(long)]
+    pub ops: bool,
     /// Calibration of the whole-step runs.
     #[arg(long, default_value = "models/calibration/nuscenes_like.toml")]
     pub calibration: PathBuf,
@@ -51,6 +55,8 @@ pub struct StageTimes {
     pub kernel_family: &'static str,
     /// `(stage, wall time of each repeat in ms)`, in pipeline order.
     pub stages_ms: Vec<(&'static str, Vec<f64>)>,
+    /// With `--ops`: per stage, `(operator kind, ms)` of one node-by-node run, largest first.
+    pub ops_ms: Vec<(&'static str, Vec<(String, f64)>)>,
     /// Wall time of each whole step (six cameras), ms; empty with `step_skipped` when the
     /// built-in memory layout cannot hold the model.
     pub step_ms: Vec<f64>,
@@ -143,6 +149,12 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
         };
         stages_ms.push((stage.name(), times));
     }
+    let mut ops_ms = Vec::new();
+    if args.ops {
+        for stage in Stage::ALL {
+            ops_ms.push((stage.name(), engine.profile_ops(stage)?));
+        }
+    }
 
     let calibration = from_toml_file(&args.calibration)?;
     let threads = engine.threads().get();
@@ -152,9 +164,10 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
             let mut sequence = 0u64;
             let times = time_ms(n, || {
                 sequence += 1;
+                let timestamp_us = sequence * 100_000;
                 let frame = Frame {
                     sequence,
-                    timestamp_us: sequence * 100_000,
+                    timestamp_us,
                     pose: EgoPose::new(DVec2::ZERO, 0.3),
                     motion: EgoMotion {
                         acceleration_mps2: Vec3::new(0.1, 0.4, 0.0),
@@ -166,7 +179,7 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
                             width_px,
                             height_px,
                             rgb: &image,
-                            capture_us: 0,
+                            capture_us: timestamp_us,
                             valid: true,
                         })
                     }),
@@ -183,6 +196,7 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
         threads,
         kernel_family: kernel_family(),
         stages_ms,
+        ops_ms,
         step_ms,
         step_skipped,
         max_rss_kib: max_rss_kib(),

@@ -487,6 +487,42 @@ impl TractEngine {
         Ok(())
     }
 
+    /// Run `stage` once more on the inputs of its last run, timing every node of its plan:
+    /// wall milliseconds summed per operator kind (tract's op name), largest first. A
+    /// measurement tool (`satmap-sim bench-stages --ops`), not a step path: it allocates.
+    ///
+    /// # Errors
+    /// The run failing, as [`Engine`]'s stage calls report it.
+    pub fn profile_ops(&mut self, stage: Stage) -> Result<Vec<(String, f64)>, EngineError> {
+        let (r, executor) = self.runner(stage);
+        let inputs: TVec<TValue> = r
+            .inputs
+            .iter()
+            .map(|t| TValue::from_const(Arc::clone(t)))
+            .collect();
+        let mut totals: Vec<(String, f64)> = Vec::new();
+        let state = &mut r.state;
+        let run = multithread_tract_scope(executor.clone(), || {
+            state.run_plan_with_eval(inputs, |ctx, op_state, node, node_inputs| {
+                let t = std::time::Instant::now();
+                let out = tract_nnef::tract_core::plan::eval(ctx, op_state, node, node_inputs);
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                let name = node.op().name();
+                match totals.iter_mut().find(|(n, _)| n.as_str() == name.as_ref()) {
+                    Some((_, total)) => *total += ms,
+                    None => totals.push((name.into_owned(), ms)),
+                }
+                out
+            })
+        });
+        if let Err(e) = run {
+            r.last_error = Some(format!("{e:#}"));
+            return Err(r.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)));
+        }
+        totals.sort_by(|a, b| b.1.total_cmp(&a.1));
+        Ok(totals)
+    }
+
     /// Threads the stages run on (see [`TractEngine::set_threads`]).
     #[must_use]
     pub fn threads(&self) -> NonZeroUsize {
