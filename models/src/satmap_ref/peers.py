@@ -111,20 +111,36 @@ def worker_pytorch(bundle: Path, config: str, weights: Path | None, threads: int
 
 
 def worker_peak(threads: int, repeats: int) -> dict:
-    """GFLOP/s of a PEAK_N^3 f32 matmul, NumPy's BLAS and PyTorch's, best repeat each."""
+    """GFLOP/s of a PEAK_N^3 f32 matmul through NumPy's BLAS, PyTorch and onnxruntime's MLAS
+    (a one-node MatMul graph), best repeat each; the peak is the best of the three."""
     import numpy as np
+    import onnxruntime as ort
     import torch
+    from onnx import TensorProto, helper
     torch.set_num_threads(threads)
     rng = np.random.default_rng(0)
     a = rng.standard_normal((PEAK_N, PEAK_N), dtype=np.float32)
     b = rng.standard_normal((PEAK_N, PEAK_N), dtype=np.float32)
     ta, tb = torch.from_numpy(a), torch.from_numpy(b)
+    shape = [PEAK_N, PEAK_N]
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["a", "b"], ["c"])], "peak",
+        [helper.make_tensor_value_info(n, TensorProto.FLOAT, shape) for n in ("a", "b")],
+        [helper.make_tensor_value_info("c", TensorProto.FLOAT, shape)])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8)
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = threads
+    so.inter_op_num_threads = 1
+    sess = ort.InferenceSession(model.SerializeToString(), so, providers=["CPUExecutionProvider"])
     flop = 2.0 * PEAK_N ** 3
-    np_ms = min(_time(repeats, lambda: a @ b))
-    torch_ms = min(_time(repeats, lambda: torch.mm(ta, tb)))
-    return {"threads": threads, "n": PEAK_N, "numpy_gflops": flop / np_ms / 1e6,
-            "pytorch_gflops": flop / torch_ms / 1e6,
-            "gflops": max(flop / np_ms, flop / torch_ms) / 1e6}
+    by = {
+        "numpy": min(_time(repeats, lambda: a @ b)),
+        "pytorch": min(_time(repeats, lambda: torch.mm(ta, tb))),
+        "onnxruntime": min(_time(repeats, lambda: sess.run(None, {"a": a, "b": b}))),
+    }
+    gflops = {k: flop / ms / 1e6 for k, ms in by.items()}
+    return {"threads": threads, "n": PEAK_N, "gflops_by_library": gflops,
+            "gflops": max(gflops.values())}
 
 
 def stage_flops(config: str) -> dict[str, int]:
@@ -225,11 +241,25 @@ def _step_sum(med: dict[str, float]) -> float:
     return sum(med[s] * (6 if s == "image_encoder" else 1) for s in STAGE_NAMES)
 
 
+BEGIN = "<!-- bench-peers: begin (written by `make bench-peers`, do not edit) -->"
+END = "<!-- bench-peers: end -->"
+
+
+def write_markdown(path: Path, block: str) -> None:
+    """Put `block` between the BEGIN/END markers of `path`, keeping the hand-written text
+    around them; a file without markers gets a title and the block."""
+    text = path.read_text() if path.exists() else ""
+    if BEGIN in text and END in text:
+        head, rest = text.split(BEGIN, 1)
+        tail = rest.split(END, 1)[1]
+    else:
+        head, tail = "# Speed against onnxruntime and PyTorch\n\n", "\n"
+    path.write_text(f"{head}{BEGIN}\n{block}{END}{tail}")
+
+
 def markdown(result: dict, command: str) -> str:
     m = result["machine"]
     lines = [
-        "# Speed against onnxruntime and PyTorch (`make bench-peers`)",
-        "",
         f"Written by `{command}` on {m['cpu']} ({m['cores']} cores, tract kernel family "
         f"`{m['kernel_family']}`). Medians of every timed repeat of every round, milliseconds; "
         "every engine in its own process, engines alternating. Inputs: each bundle's "
@@ -239,15 +269,15 @@ def markdown(result: dict, command: str) -> str:
         "",
     ]
     for t, p in result["peak"].items():
-        lines.append(f"- Peak at {t} thread(s): {p['gflops']:.1f} GFLOP/s "
-                     f"(NumPy BLAS {p['numpy_gflops']:.1f}, PyTorch {p['pytorch_gflops']:.1f}; "
-                     f"{p['n']}^3 f32 matmul).")
+        by = ", ".join(f"{k} {v:.1f}" for k, v in p["gflops_by_library"].items())
+        lines.append(f"- Peak at {t} thread(s): {p['gflops']:.1f} GFLOP/s, the best of a "
+                     f"{p['n']}^3 f32 matmul through {by}.")
     lines.append("")
     for name, b in result["bundles"].items():
         for t, r in b["threads"].items():
             peak = result["peak"][t]["gflops"]
             med = r["median_ms"]
-            lines += [f"## {name} (config `{b['config']}`), {t} thread(s)", "",
+            lines += [f"### {name} (config `{b['config']}`), {t} thread(s)", "",
                       "| stage | GFLOP | ours ms | ORT ms | PyTorch ms | x ORT | x PyTorch | "
                       "% peak ours / ORT / PyTorch |",
                       "|---|---|---|---|---|---|---|---|"]
@@ -304,14 +334,22 @@ def main(argv: list[str] | None = None) -> None:
         return
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sim", type=Path, required=True, help="the satmap-sim binary")
-    ap.add_argument("--bundle", action="append", required=True,
+    ap.add_argument("--sim", type=Path, help="the satmap-sim binary")
+    ap.add_argument("--render", type=Path,
+                    help="only rewrite <out>.md from this JSON of an earlier run")
+    ap.add_argument("--bundle", action="append", default=[],
                     help="NAME=DIR[:WEIGHTS] of an exported folder bundle (repeatable)")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=5, help="timed runs per stage per process")
     ap.add_argument("--out", type=Path, required=True, help="path stem: writes .md and .json")
     a = ap.parse_args(argv)
+    if a.render is not None:
+        result = json.loads(a.render.read_text())
+        write_markdown(a.out.with_suffix(".md"), markdown(result, result["command"]))
+        return
+    if a.sim is None or not a.bundle:
+        ap.error("--sim and at least one --bundle are required")
     specs = [_parse_bundle(s) for s in a.bundle]
     result = run(a.sim.resolve(), specs, a.threads, a.rounds, a.repeats,
                  log=lambda s: print(s, file=sys.stderr, flush=True))
@@ -319,7 +357,7 @@ def main(argv: list[str] | None = None) -> None:
     result["command"] = command
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
-    a.out.with_suffix(".md").write_text(markdown(result, command))
+    write_markdown(a.out.with_suffix(".md"), markdown(result, command))
     print(f"wrote {a.out.with_suffix('.md')} and {a.out.with_suffix('.json')}")
 
 
