@@ -73,3 +73,31 @@ def test_folded_queue_equals_two_entry_attention():
         ref = tsa.output_proj((outs[0] + outs[1]) / 2) + q
     assert torch.abs(ours - ref).max() < 1e-5
     assert np.isfinite(ours.numpy()).all()
+
+
+def test_weighted_axis_sum_is_the_weighted_sum_in_a_fixed_order():
+    from satmap_ref.sampling import kernel_golden, weighted_axis_sum
+    g = kernel_golden()
+    a, b = g["a"], g["b"]
+    want = (a.astype(np.float64) * b.astype(np.float64)).sum(axis=2, keepdims=True)
+    got = weighted_axis_sum(a, b, 2)
+    assert got.shape == (6, 3, 1, 5) and got.dtype == np.float32
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    # The order is part of the contract: summing k descending changes the last bits somewhere.
+    rev = weighted_axis_sum(a[:, :, ::-1], b[:, :, ::-1], 2)
+    assert not np.array_equal(got.view(np.uint32), rev.view(np.uint32))
+    # The gathered form is the plain form on the gathered rows.
+    gathered = g["data"][g["indices"]].reshape(6, 3, 8, 5)
+    assert np.array_equal(g["gathered_out"], weighted_axis_sum(gathered, b, 2))
+
+
+def test_committed_kernel_golden_is_current():
+    from safetensors.numpy import load_file
+
+    from satmap_ref.sampling import KERNEL_GOLDEN, kernel_golden
+    committed = load_file(str(KERNEL_GOLDEN))
+    fresh = kernel_golden()
+    assert sorted(committed) == sorted(fresh)
+    for k, v in fresh.items():
+        assert committed[k].dtype == v.dtype and np.array_equal(
+            committed[k].view(np.uint8), v.view(np.uint8)), k

@@ -4,8 +4,13 @@ constant matrices (replaces `Resize`)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import torch
+
+# The committed vectors of the runtime's native corner-sum kernel (`kernel_golden`).
+KERNEL_GOLDEN = Path(__file__).resolve().parents[2] / "golden" / "kernels" / "weighted_axis_sum.safetensors"
 
 
 def bilinear_gather_sum(
@@ -77,3 +82,44 @@ class Resize2d(torch.nn.Module):
         if self.identity:
             return x
         return torch.matmul(torch.matmul(self.a_h, x), self.a_w_t)
+
+
+def weighted_axis_sum(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
+    """The runtime's native corner-sum kernel (`engine_tract::weighted_sum::WeightedAxisSum`,
+    which replaces tract's `Mul -> ReduceSum` over a middle axis), bit for bit: the sum over
+    `axis` of `a * b` (numpy broadcasting, f32, the axis kept as size 1), each output element
+    starting at 0.0 and adding `a[k] * b[k]` for k ascending, a multiply then an add (numpy
+    never fuses them)."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float32), np.asarray(b, dtype=np.float32))
+    shape = a.shape[:axis] + (1,) + a.shape[axis + 1:]
+    acc = np.zeros(shape, dtype=np.float32)
+    for k in range(a.shape[axis]):
+        acc = acc + np.take(a, [k], axis=axis) * np.take(b, [k], axis=axis)
+    return acc
+
+
+def kernel_golden(seed: int = 0) -> dict[str, np.ndarray]:
+    """Vectors the Rust kernel is checked against bit for bit (`tests/native_kernels.rs`): the
+    sampler's shape in small, `[N=6, heads=3, corners x points=8, dh=5]` with per-corner weights
+    `[6, 3, 8, 1]`, summed over axis 2; and the gathered form, rows of `data [20, 5]` picked by
+    `indices [144]` and reshaped to that operand. Magnitudes span 1e-3..1e3 so that the
+    summation order shows in the last bits."""
+    rng = np.random.default_rng(seed)
+    scale = np.float32(10.0) ** rng.integers(-3, 4, size=(6, 3, 8, 5)).astype(np.float32)
+    a = (rng.standard_normal((6, 3, 8, 5)).astype(np.float32) * scale).astype(np.float32)
+    b = rng.standard_normal((6, 3, 8, 1)).astype(np.float32)
+    data = (rng.standard_normal((20, 5)).astype(np.float32)
+            * np.float32(10.0) ** rng.integers(-3, 4, size=(20, 5)).astype(np.float32))
+    indices = rng.integers(0, 20, size=6 * 3 * 8).astype(np.int64)
+    return {
+        "a": a, "b": b, "out": weighted_axis_sum(a, b, 2),
+        "data": data, "indices": indices,
+        "gathered_out": weighted_axis_sum(data[indices].reshape(6, 3, 8, 5), b, 2),
+    }
+
+
+if __name__ == "__main__":
+    from safetensors.numpy import save_file
+    KERNEL_GOLDEN.parent.mkdir(parents=True, exist_ok=True)
+    save_file(kernel_golden(), str(KERNEL_GOLDEN))
+    print(f"wrote {KERNEL_GOLDEN}")

@@ -21,6 +21,8 @@ use std::sync::Arc;
 
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
+pub mod weighted_sum;
+
 use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
 
@@ -97,6 +99,8 @@ struct StageRunner {
     state: TypedSimpleState,
     inputs: Vec<Arc<Tensor>>,
     output_lens: Vec<usize>,
+    /// `Mul -> Reduce<Sum>` pairs rewritten into the native [`weighted_sum::WeightedAxisSum`].
+    fused_sums: usize,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
 }
@@ -113,6 +117,10 @@ impl StageRunner {
             GraphFormat::Onnx => onnx_model(stage, &bytes, entry)?,
         };
         drop(bytes);
+        let (model, fused_sums) = model
+            .into_decluttered()
+            .and_then(weighted_sum::fuse_weighted_sums)
+            .map_err(engine_err)?;
         let plan = model
             .into_optimized()
             .and_then(|m| m.into_runnable())
@@ -140,6 +148,7 @@ impl StageRunner {
             state,
             inputs,
             output_lens,
+            fused_sums,
             last_error: None,
         })
     }
@@ -521,6 +530,13 @@ impl TractEngine {
         }
         totals.sort_by(|a, b| b.1.total_cmp(&a.1));
         Ok(totals)
+    }
+
+    /// How many `Mul -> Reduce<Sum>` pairs of `stage` run as the native
+    /// [`weighted_sum::WeightedAxisSum`] (the deformable samplers' corner sums).
+    #[must_use]
+    pub fn fused_weighted_sums(&self, stage: Stage) -> usize {
+        self.runners.get(stage as usize).map_or(0, |r| r.fused_sums)
     }
 
     /// Threads the stages run on (see [`TractEngine::set_threads`]).

@@ -1,0 +1,515 @@
+//! The native kernel for the deformable samplers' corner sums: `ReduceSum(a * b, axis)` over one
+//! middle axis, fused into one pass with a fixed summation order.
+//!
+//! Both deformable samplers (`bev_query`'s self-attention and `map_decoder`'s cross-attention,
+//! `satmap_ref.sampling.bilinear_gather_sum`) end in `(corners * weights).sum(dim=2)` over
+//! `[N, heads, 4 x points, dh]`. tract 0.23.9 reduces a middle axis through ndarray's generic
+//! `sum_axis` (its fast paths cover the last and the leading axes), which was 58% of `bev_query`
+//! and 23% of `map_decoder` in `nano` (docs/perf.md). At load, [`fuse_weighted_sums`] rewrites
+//! every `Mul -> Reduce<Sum>` pair of that shape into [`WeightedAxisSum`], which reads both
+//! operands once and never materialises the product.
+//!
+//! Order (the contract `satmap_ref.sampling.weighted_axis_sum` reproduces bit for bit): for every
+//! output element, `acc = 0.0f32`, then for k ascending `acc = acc + a[k] * b[k]` (an f32
+//! multiply, then an f32 add; no FMA), broadcasting as numpy does.
+
+use tract_nnef::internal::*;
+use tract_nnef::tract_core::ops::binary::TypedBinOp;
+use tract_nnef::tract_core::ops::change_axes::AxisOp;
+use tract_nnef::tract_core::ops::math::Mul;
+use tract_nnef::tract_core::ops::nn::{Reduce, Reducer};
+
+/// `out = sum over axis of a * b` (a and b broadcast together; the axis kept, as size 1).
+///
+/// With `gathered`, `a` is not an input: it is `data[indices]` (a Gather of rows of a `[R, dh]`
+/// matrix) reshaped to `gathered`, whose last dim is `dh` and whose summed axis is the one
+/// before it; the inputs are then `(data, indices, b)` and the rows are read in place.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct WeightedAxisSum {
+    /// The summed axis, counted in the broadcast shape (never the last one).
+    pub axis: usize,
+    /// The shape of the gathered operand, when it is gathered.
+    pub gathered: Option<TVec<usize>>,
+}
+
+impl Op for WeightedAxisSum {
+    fn name(&self) -> StaticName {
+        "WeightedAxisSum".into()
+    }
+    op_as_typed_op!();
+}
+
+/// How one operand is read: its offset for outer block `o`, summed index `k`, inner index `i` is
+/// `(o * k_len + k) * inner_len + i`, with `i` dropped when the operand is broadcast over the
+/// inner dims (`inner_len == 1`).
+struct Operand<'a> {
+    data: &'a [f32],
+    inner_len: usize,
+    /// For a gathered operand: the data row of each `(o, k)` row.
+    rows: Option<&'a [i64]>,
+}
+
+impl Operand<'_> {
+    fn row(&self, r: usize) -> &[f32] {
+        let start = match self.rows {
+            // In range: checked against the data before the loop.
+            Some(rows) => rows[r] as usize * self.inner_len,
+            None => r * self.inner_len,
+        };
+        &self.data[start..][..self.inner_len]
+    }
+}
+
+impl EvalOp for WeightedAxisSum {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let (full, b_in): (TVec<usize>, &TValue) = match &self.gathered {
+            Some(shape) => {
+                ensure!(
+                    inputs.len() == 3,
+                    "gathered WeightedAxisSum takes three inputs"
+                );
+                let full = tract_nnef::tract_core::broadcast::multi_broadcast(&[
+                    &**shape,
+                    inputs[2].shape(),
+                ])?;
+                ensure!(
+                    full == *shape,
+                    "the weights broadcast beyond the gathered operand"
+                );
+                (full, &inputs[2])
+            }
+            None => {
+                ensure!(inputs.len() == 2, "WeightedAxisSum takes two inputs");
+                let full = tract_nnef::tract_core::broadcast::multi_broadcast(&[
+                    inputs[0].shape(),
+                    inputs[1].shape(),
+                ])?;
+                (full, &inputs[1])
+            }
+        };
+        ensure!(
+            self.axis + 1 < full.len(),
+            "WeightedAxisSum over the last axis"
+        );
+        let outer: usize = full[..self.axis].iter().product();
+        let k_len = full[self.axis];
+        let inner: usize = full[self.axis + 1..].iter().product();
+        // Operands in the two layouts the fast loop reads are read in place; anything else (a
+        // broadcast over the outer or summed dims) is materialised first: correct, slower, and
+        // never what our graphs hand it.
+        let fast = |t: &TValue| {
+            let pad = full.len() - t.rank();
+            let dim = |d: usize| if d < pad { 1 } else { t.shape()[d - pad] };
+            let head_same = (0..=self.axis).all(|d| dim(d) == full[d]);
+            let tail = self.axis + 1..full.len();
+            let inner_ok =
+                tail.clone().all(|d| dim(d) == full[d]) || tail.clone().all(|d| dim(d) == 1);
+            head_same && inner_ok
+        };
+        let owned = |t: &TValue| -> TractResult<Option<Tensor>> {
+            if fast(t) {
+                Ok(None)
+            } else {
+                t.broadcast_to_shape(&full).map(Some)
+            }
+        };
+        let b_owned = owned(b_in)?;
+        let b = plain_operand(b_in, &b_owned, outer * k_len)?;
+        let mut out = vec![0.0f32; outer * inner];
+        match &self.gathered {
+            Some(_) => {
+                let data = inputs[0].try_as_plain_ram()?.as_slice::<f32>()?;
+                let rows = inputs[1].try_as_plain_ram()?.as_slice::<i64>()?;
+                ensure!(inputs[0].rank() == 2 && inputs[0].shape()[1] == inner);
+                ensure!(
+                    rows.len() == outer * k_len,
+                    "gather indices do not fill the operand"
+                );
+                let n_rows = inputs[0].shape()[0] as i64;
+                ensure!(
+                    rows.iter().all(|&r| (0..n_rows).contains(&r)),
+                    "gather index out of range (0..{n_rows})"
+                );
+                let a = Operand {
+                    data,
+                    inner_len: inner,
+                    rows: Some(rows),
+                };
+                weighted_axis_sum(&a, &b, k_len, inner, &mut out);
+            }
+            None => {
+                let a_owned = owned(&inputs[0])?;
+                let a = plain_operand(&inputs[0], &a_owned, outer * k_len)?;
+                weighted_axis_sum(&a, &b, k_len, inner, &mut out);
+            }
+        }
+        let mut out_shape: TVec<usize> = full.clone();
+        out_shape[self.axis] = 1;
+        Ok(tvec!(Tensor::from_shape(&out_shape, &out)?.into_tvalue()))
+    }
+}
+
+/// `t` (or its materialised broadcast `o`) as an [`Operand`] of `rows` rows.
+fn plain_operand<'a>(
+    t: &'a TValue,
+    o: &'a Option<Tensor>,
+    rows: usize,
+) -> TractResult<Operand<'a>> {
+    let t: &Tensor = o.as_ref().unwrap_or(t);
+    let data = t.try_as_plain_ram()?.as_slice::<f32>()?;
+    Ok(Operand {
+        data,
+        inner_len: data.len() / rows.max(1),
+        rows: None,
+    })
+}
+
+/// The fixed-order loop: `out[o, i] = sum_k a[o, k, i] * b[o, k, i]`, k ascending.
+fn weighted_axis_sum(
+    a: &Operand<'_>,
+    b: &Operand<'_>,
+    k_len: usize,
+    inner: usize,
+    out: &mut [f32],
+) {
+    for (o, acc) in out.chunks_exact_mut(inner).enumerate() {
+        for k in 0..k_len {
+            let row = o * k_len + k;
+            let ra = a.row(row);
+            let rb = b.row(row);
+            match (ra.len() == inner, rb.len() == inner) {
+                (true, true) => {
+                    for ((s, x), y) in acc.iter_mut().zip(ra).zip(rb) {
+                        *s += *x * *y;
+                    }
+                }
+                (true, false) => {
+                    let y = rb[0];
+                    for (s, x) in acc.iter_mut().zip(ra) {
+                        *s += *x * y;
+                    }
+                }
+                (false, true) => {
+                    let x = ra[0];
+                    for (s, y) in acc.iter_mut().zip(rb) {
+                        *s += x * *y;
+                    }
+                }
+                (false, false) => {
+                    let p = ra[0] * rb[0];
+                    for s in acc.iter_mut() {
+                        *s += p;
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl TypedOp for WeightedAxisSum {
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        let mut shape = match &self.gathered {
+            Some(g) => {
+                ensure!(inputs.len() == 3);
+                ensure!(inputs[0].datum_type == f32::datum_type());
+                ensure!(inputs[1].datum_type == i64::datum_type());
+                ensure!(inputs[2].datum_type == f32::datum_type());
+                g.iter().map(|&d| d.to_dim()).collect::<TVec<TDim>>()
+            }
+            None => {
+                ensure!(inputs.len() == 2);
+                ensure!(inputs.iter().all(|f| f.datum_type == f32::datum_type()));
+                tract_nnef::tract_core::broadcast::multi_broadcast(&[
+                    &*inputs[0].shape.to_tvec(),
+                    &*inputs[1].shape.to_tvec(),
+                ])?
+            }
+        };
+        ensure!(self.axis + 1 < shape.len());
+        shape[self.axis] = 1.to_dim();
+        Ok(tvec!(f32::fact(shape)))
+    }
+
+    fn cost(&self, inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
+        let n: TDim = inputs[0].shape.iter().product();
+        Ok(tvec!((Cost::FMA(f32::datum_type()), n)))
+    }
+
+    as_op!();
+}
+
+/// A `Mul -> Reduce<Sum>` pair to rewrite: the Reduce node, its axis and the fused op's inputs.
+struct Fusion {
+    reduce: usize,
+    op: WeightedAxisSum,
+    inputs: TVec<OutletId>,
+}
+
+/// True when `outlet` feeds exactly one node and is not a model output.
+fn single_use(model: &TypedModel, outlet: OutletId) -> TractResult<bool> {
+    Ok(model.node(outlet.node).outputs[outlet.slot]
+        .successors
+        .len()
+        == 1
+        && !model.output_outlets()?.contains(&outlet))
+}
+
+/// `outlet` as `Reshape(0, [M], dims)` of `Gather(axis 0)` of a `[R, dh]` f32 matrix by i64
+/// indices, both single-use: the Gather's inputs and the operand's shape `dims` (ending in dh).
+fn gathered_rows(
+    model: &TypedModel,
+    outlet: OutletId,
+) -> TractResult<Option<(OutletId, OutletId, TVec<usize>)>> {
+    let reshape = model.node(outlet.node);
+    let Some(AxisOp::Reshape(0, from, _)) = reshape.op_as::<AxisOp>() else {
+        return Ok(None);
+    };
+    if from.len() != 1 || !single_use(model, reshape.inputs[0])? {
+        return Ok(None);
+    }
+    let gather = model.node(reshape.inputs[0].node);
+    let is_row_gather = gather
+        .op_as::<tract_nnef::tract_core::ops::array::Gather>()
+        .is_some_and(|g| g.axis == 0 && g.output_type.is_none());
+    if !is_row_gather {
+        return Ok(None);
+    }
+    let (data, indices) = (gather.inputs[0], gather.inputs[1]);
+    let data_fact = model.outlet_fact(data)?;
+    let index_fact = model.outlet_fact(indices)?;
+    let Some(shape) = model
+        .outlet_fact(outlet)?
+        .shape
+        .as_concrete()
+        .map(TVec::from)
+    else {
+        return Ok(None);
+    };
+    let data_dims = data_fact.shape.as_concrete();
+    let ok = data_fact.datum_type == f32::datum_type()
+        && index_fact.datum_type == i64::datum_type()
+        && index_fact.rank() == 1
+        && data_dims.is_some_and(|d| d.len() == 2 && shape.last() == Some(&d[1]));
+    Ok(ok.then_some((data, indices, shape)))
+}
+
+/// The first `Mul -> Reduce<Sum>(one middle axis)` pair over f32 whose product feeds nothing
+/// else; gathered when one operand is a row gather summed over its second-to-last axis.
+fn find_pair(model: &TypedModel) -> TractResult<Option<Fusion>> {
+    for &id in &model.eval_order()? {
+        let node = model.node(id);
+        let Some(reduce) = node.op_as::<Reduce>() else {
+            continue;
+        };
+        if reduce.reducer != Reducer::Sum || reduce.axes.len() != 1 {
+            continue;
+        }
+        let fact = model.outlet_fact(node.inputs[0])?;
+        let axis = reduce.axes[0];
+        if fact.datum_type != f32::datum_type() || axis + 1 >= fact.rank() {
+            continue;
+        }
+        let mul = model.node(node.inputs[0].node);
+        let is_mul = mul
+            .op_as::<TypedBinOp>()
+            .is_some_and(|b| b.0.is::<Mul>() && b.1.is_none());
+        if !is_mul || !single_use(model, node.inputs[0])? {
+            continue;
+        }
+        let ins = [mul.inputs[0], mul.inputs[1]];
+        let mut all_f32 = true;
+        for o in ins {
+            all_f32 &= model.outlet_fact(o)?.datum_type == f32::datum_type();
+        }
+        if !all_f32 {
+            continue;
+        }
+        for (a, b) in [(ins[0], ins[1]), (ins[1], ins[0])] {
+            if axis + 2 == fact.rank()
+                && single_use(model, a)?
+                && let Some((data, indices, shape)) = gathered_rows(model, a)?
+                && shape.len() == fact.rank()
+            {
+                return Ok(Some(Fusion {
+                    reduce: id,
+                    op: WeightedAxisSum {
+                        axis,
+                        gathered: Some(shape),
+                    },
+                    inputs: tvec![data, indices, b],
+                }));
+            }
+        }
+        return Ok(Some(Fusion {
+            reduce: id,
+            op: WeightedAxisSum {
+                axis,
+                gathered: None,
+            },
+            inputs: tvec![ins[0], ins[1]],
+        }));
+    }
+    Ok(None)
+}
+
+/// Rewrite every fusable `Mul -> Reduce<Sum>` pair of a decluttered model into
+/// [`WeightedAxisSum`] (reading a row gather in place where it feeds the pair); returns the
+/// model and the number of pairs rewritten.
+///
+/// # Errors
+/// tract refusing the patch (an inconsistent model).
+pub fn fuse_weighted_sums(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
+    let mut fused = 0;
+    while let Some(f) = find_pair(&model)? {
+        let name = model.node(f.reduce).name.clone();
+        let mut patch = TypedModelPatch::default();
+        let taps = patch.taps(&model, &f.inputs)?;
+        let out = patch.wire_node(format!("{name}.weighted_axis_sum"), f.op, &taps)?;
+        patch.shunt_outside(&model, f.reduce.into(), out[0])?;
+        patch.apply(&mut model)?;
+        // Drop the replaced nodes, so the search cannot find them again.
+        model = model.into_compact()?;
+        fused += 1;
+    }
+    Ok((model, fused))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The kernel against `satmap_ref.sampling.kernel_golden` (committed in
+    //! `models/golden/kernels/`), bit for bit, through the same rewrite the engine applies.
+
+    use super::*;
+    use crate::engine::Stage;
+    use crate::engine_tract::TractEngine;
+    use tract_nnef::tract_core::ops::math::mul;
+
+    fn golden() -> Vec<u8> {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        std::fs::read(root.join("models/golden/kernels/weighted_axis_sum.safetensors"))
+            .expect("kernel golden (python -m satmap_ref.sampling)")
+    }
+
+    fn tensor(st: &safetensors::SafeTensors<'_>, name: &str) -> Tensor {
+        let t = st.tensor(name).expect("golden tensor");
+        let dt = match t.dtype() {
+            safetensors::Dtype::F32 => f32::datum_type(),
+            safetensors::Dtype::I64 => i64::datum_type(),
+            other => panic!("{name}: {other:?}"),
+        };
+        // SAFETY-free: `from_raw_dt` copies the little-endian bytes of a plain dtype.
+        unsafe { Tensor::from_raw_dt(dt, t.shape(), t.data()) }.expect("tensor")
+    }
+
+    fn bits(t: &Tensor) -> Vec<u32> {
+        t.try_as_plain_ram()
+            .unwrap()
+            .as_slice::<f32>()
+            .unwrap()
+            .iter()
+            .map(|x| x.to_bits())
+            .collect()
+    }
+
+    /// `Mul -> Reduce<Sum>(2)` over `a` (optionally a row gather) and `b`, rewritten.
+    fn fused_model(gathered: bool) -> (TypedModel, usize) {
+        let mut m = TypedModel::default();
+        let b = m.add_source("b", f32::fact([6, 3, 8, 1])).unwrap();
+        let a = if gathered {
+            let data = m.add_source("data", f32::fact([20, 5])).unwrap();
+            let idx = m.add_source("indices", i64::fact([144])).unwrap();
+            let g = m
+                .wire_node(
+                    "gather",
+                    tract_nnef::tract_core::ops::array::Gather::new(0),
+                    &[data, idx],
+                )
+                .unwrap();
+            let to: TVec<TDim> = tvec![6.into(), 3.into(), 8.into()];
+            m.wire_node("reshape", AxisOp::Reshape(0, tvec![144.into()], to), &g)
+                .unwrap()[0]
+        } else {
+            m.add_source("a", f32::fact([6, 3, 8, 5])).unwrap()
+        };
+        let p = m.wire_node("mul", mul(), &[a, b]).unwrap();
+        let s = m
+            .wire_node("sum", Reduce::new(tvec![2], Reducer::Sum), &p)
+            .unwrap();
+        m.select_output_outlets(&s).unwrap();
+        let m = m.into_decluttered().unwrap();
+        let (m, fused) = fuse_weighted_sums(m).unwrap();
+        let found = m
+            .nodes()
+            .iter()
+            .filter_map(|n| n.op_as::<WeightedAxisSum>());
+        let ops: Vec<_> = found.collect();
+        assert_eq!(ops.len(), 1);
+        assert_eq!(ops[0].gathered.is_some(), gathered);
+        (m.into_optimized().unwrap(), fused)
+    }
+
+    #[test]
+    fn the_fused_sum_is_the_python_reference_bit_for_bit() {
+        let bytes = golden();
+        let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+        let (model, fused) = fused_model(false);
+        let plan = model.into_runnable().unwrap();
+        assert_eq!(fused, 1);
+        let out = plan
+            .run(tvec![
+                tensor(&st, "b").into_tvalue(),
+                tensor(&st, "a").into_tvalue()
+            ])
+            .unwrap();
+        assert_eq!(out[0].shape(), [6, 3, 1, 5]);
+        assert_eq!(bits(&out[0]), bits(&tensor(&st, "out")));
+    }
+
+    #[test]
+    fn the_gathered_sum_reads_rows_in_place_and_refuses_a_bad_index() {
+        let bytes = golden();
+        let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+        let (model, fused) = fused_model(true);
+        let plan = model.into_runnable().unwrap();
+        assert_eq!(fused, 1);
+        let run = |idx: Tensor| {
+            plan.run(tvec![
+                tensor(&st, "b").into_tvalue(),
+                tensor(&st, "data").into_tvalue(),
+                idx.into_tvalue(),
+            ])
+        };
+        let out = run(tensor(&st, "indices")).unwrap();
+        assert_eq!(bits(&out[0]), bits(&tensor(&st, "gathered_out")));
+        // An index past the data is an error value, and the plan still runs the next input.
+        for bad in [20i64, -1] {
+            let mut idx = tensor(&st, "indices");
+            idx.try_as_plain_ram_mut()
+                .unwrap()
+                .as_slice_mut::<i64>()
+                .unwrap()[7] = bad;
+            let err = run(idx).unwrap_err();
+            assert!(format!("{err:#}").contains("out of range"), "{err:#}");
+        }
+        let again = run(tensor(&st, "indices")).unwrap();
+        assert_eq!(bits(&again[0]), bits(&tensor(&st, "gathered_out")));
+    }
+
+    #[test]
+    fn both_samplers_of_the_default_bundle_run_natively() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let engine = TractEngine::open(root.join("models/bundles/test.satmap")).unwrap();
+        assert_eq!(engine.fused_weighted_sums(Stage::BevQuery), 1);
+        // One cross-attention per decoder layer (`test` has 2).
+        assert_eq!(engine.fused_weighted_sums(Stage::MapDecoder), 2);
+        for stage in [
+            Stage::ImageEncoder,
+            Stage::BevEncoder,
+            Stage::SatelliteEncoder,
+        ] {
+            assert_eq!(engine.fused_weighted_sums(stage), 0, "{stage}");
+        }
+    }
+}
