@@ -22,14 +22,22 @@ import argparse
 import json
 import os
 import platform
-import resource
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from .model import STAGE_NAMES
+
+def _stage_names(bundle: Path | None = None) -> tuple[str, ...]:
+    """The stages in pipeline order: the bundle manifest's (the onnxruntime worker must not
+    import torch, whose ~600 MB would count as onnxruntime's resident set), else the model's."""
+    if bundle is not None:
+        import tomllib
+        manifest = tomllib.loads((bundle / "manifest.toml").read_text())
+        return tuple(s["name"] for s in manifest["stage"])
+    from .model import STAGE_NAMES
+    return STAGE_NAMES
 
 ENGINES = ("satmap", "onnxruntime", "pytorch")
 PEAK_N = 2048
@@ -62,14 +70,20 @@ def _time(repeats: int, fn) -> list[float]:
 
 
 def _max_rss_kib() -> int:
-    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    """This process's peak resident set, KiB: `VmHWM`, which starts afresh at exec. Not
+    `getrusage(RUSAGE_SELF).ru_maxrss`: Linux carries the parent's peak into a forked child's
+    `ru_maxrss`, so every worker would report at least the driver's own peak."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+    return 0
 
 
 def worker_onnxruntime(bundle: Path, threads: int, repeats: int) -> dict:
     import onnxruntime as ort
     ref = _reference(bundle)
     stages = []
-    for name in STAGE_NAMES:
+    for name in _stage_names(bundle):
         so = ort.SessionOptions()
         so.intra_op_num_threads = threads
         so.inter_op_num_threads = 1
@@ -99,7 +113,7 @@ def worker_pytorch(bundle: Path, config: str, weights: Path | None, threads: int
     ref = _reference(bundle)
     stages = []
     with torch.inference_mode():
-        for name in STAGE_NAMES:
+        for name in _stage_names():
             stage = model.stages[name]
             from .export import stage_io
             ins, _ = stage_io(cfg)[name]
@@ -151,7 +165,7 @@ def stage_flops(config: str) -> dict[str, int]:
     set_deterministic()
     cfg = get_config(config)
     model = build_model(cfg, 0)
-    return {n: _flops(model.stages[n], example_inputs(cfg, n)) for n in STAGE_NAMES}
+    return {n: _flops(model.stages[n], example_inputs(cfg, n)) for n in _stage_names()}
 
 
 def _run_json(cmd: list[str], threads: int) -> dict:
@@ -238,7 +252,7 @@ def _machine() -> dict:
 
 def _step_sum(med: dict[str, float]) -> float:
     """A frame's stage time: six cameras' image encoders plus the other stages once."""
-    return sum(med[s] * (6 if s == "image_encoder" else 1) for s in STAGE_NAMES)
+    return sum(med[s] * (6 if s == "image_encoder" else 1) for s in med)
 
 
 BEGIN = "<!-- bench-peers: begin (written by `make bench-peers`, do not edit) -->"
@@ -281,7 +295,7 @@ def markdown(result: dict, command: str) -> str:
                       "| stage | GFLOP | ours ms | ORT ms | PyTorch ms | x ORT | x PyTorch | "
                       "% peak ours / ORT / PyTorch |",
                       "|---|---|---|---|---|---|---|---|"]
-            for s in STAGE_NAMES:
+            for s in _stage_names():
                 gf = b["flops"][s] / 1e9
                 o, x, y = med["satmap"][s], med["onnxruntime"][s], med["pytorch"][s]
                 pct = " / ".join(f"{100 * gf / (v / 1e3) / peak:.0f}%" for v in (o, x, y))
