@@ -1,0 +1,52 @@
+"""`satmap_ref.peers` (make bench-peers) without running any engine: its table arithmetic, the
+marker block it rewrites in docs/perf.md, the stage order it reads off a bundle, and the
+resident-set reading each worker reports."""
+
+from pathlib import Path
+
+from satmap_ref import peers
+
+BUNDLE = Path(__file__).resolve().parents[1] / "bundles" / "test"
+
+
+def _result() -> dict:
+    stages = peers._stage_names(BUNDLE)
+    med = {e: {s: 10.0 * (i + 1) for s in stages} for i, e in enumerate(peers.ENGINES)}
+    return {
+        "machine": {"cpu": "x", "cores": 2, "kernel_family": "amd-avx512f"},
+        "peak": {"1": {"gflops": 100.0, "gflops_by_library": {"numpy": 100.0}, "n": 2048}},
+        "bundles": {"test": {"config": "test", "flops": {s: 1e9 for s in stages},
+                             "threads": {"1": {"median_ms": med, "satmap_step_median_ms": 70.0,
+                                               "engines": {e: {"max_rss_kib": 2048}
+                                                           for e in peers.ENGINES}}}}},
+    }
+
+
+def test_stage_order_comes_from_the_manifest_without_torch():
+    assert peers._stage_names(BUNDLE) == ("image_encoder", "bev_query", "bev_encoder",
+                                          "satellite_encoder", "map_decoder")
+
+
+def test_table_ratios_and_peak_share():
+    md = peers.markdown(_result(), "cmd")
+    # ours 10 ms, onnxruntime 20 ms, pytorch 30 ms: x ORT 0.50; 1 GFLOP in 10 ms = 100 GFLOP/s.
+    assert "| bev_query | 1.000 | 10.00 | 20.00 | 30.00 | 0.50 | 0.33 | 100% / 50% / 33% |" in md
+    # A frame is six image encoders and the other four stages once.
+    assert "| frame: 6 x image_encoder + the rest | | 100.0 | 200.0 | 300.0 | 0.50 | 0.33 | |" in md
+    assert "2 / 2 / 2" in md
+
+
+def test_the_block_is_replaced_between_markers_and_the_rest_kept(tmp_path):
+    doc = tmp_path / "perf.md"
+    doc.write_text(f"# Title\nhand text\n{peers.BEGIN}\nold table\n{peers.END}\ntail text\n")
+    peers.write_markdown(doc, "new table\n")
+    text = doc.read_text()
+    assert "old table" not in text and "new table" in text
+    assert text.startswith("# Title\nhand text\n") and text.endswith("tail text\n")
+
+
+def test_max_rss_is_this_process_high_water_mark():
+    kib = peers._max_rss_kib()
+    status = Path("/proc/self/status").read_text()
+    rss = int(next(ln for ln in status.splitlines() if ln.startswith("VmRSS:")).split()[1])
+    assert kib >= rss > 0
