@@ -291,28 +291,31 @@ fn gathered_rows(
         return Ok(None);
     }
     let (data, mut indices) = (gather.inputs[0], gather.inputs[1]);
-    // An f32 -> i64 Cast upstream of the indices, through single-use order-keeping reshapes, is
-    // folded in: the kernel reads the f32 values in the same (row-major) order.
+    // Integer casts of f32 values upstream of the indices, through single-use order-keeping
+    // reshapes, are folded in (tract loads ONNX's f32 -> int64 Cast as f32 -> TDim, then TDim ->
+    // i64 before the Gather): the kernel reads the f32 values in the same row-major order and
+    // converts them as those casts do (`as i64`).
     let mut o = indices;
+    let mut casts = 0;
     loop {
         let n = model.node(o.node);
+        if n.inputs.len() != 1 || !single_use(model, o)? {
+            break;
+        }
         let keeps_order = n
             .op_as::<AxisOp>()
             .is_some_and(|op| !matches!(op, AxisOp::Move(..)));
-        if keeps_order && single_use(model, o)? {
-            o = n.inputs[0];
-            continue;
-        }
-        let is_cast = n
+        let int_cast = n
             .op_as::<tract_nnef::tract_core::ops::cast::Cast>()
-            .is_some_and(|c| c.to == i64::datum_type());
-        if is_cast
-            && single_use(model, o)?
-            && model.outlet_fact(n.inputs[0])?.datum_type == f32::datum_type()
-        {
-            indices = n.inputs[0];
+            .is_some_and(|c| c.to == i64::datum_type() || c.to == TDim::datum_type());
+        if !keeps_order && !int_cast {
+            break;
         }
-        break;
+        casts += usize::from(int_cast);
+        o = n.inputs[0];
+    }
+    if casts > 0 && model.outlet_fact(o)?.datum_type == f32::datum_type() {
+        indices = o;
     }
     let data_fact = model.outlet_fact(data)?;
     let index_fact = model.outlet_fact(indices)?;
