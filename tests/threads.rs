@@ -7,10 +7,10 @@ mod common;
 
 use std::num::NonZeroUsize;
 
-use safetensors::SafeTensors;
 use satmap_runtime::Engine;
 use satmap_runtime::capacity::layout;
 use satmap_runtime::engine_tract::TractEngine;
+use satmap_sim::cli::bench_stages::ReferenceInputs;
 use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay};
 use satmap_sim::route_pack_builder::TileCompression;
 
@@ -18,11 +18,8 @@ const TWO: NonZeroUsize = NonZeroUsize::new(2).unwrap();
 
 /// Every stage's outputs on `reference.safetensors`' inputs, as raw bits, in stage order.
 fn stage_outputs(engine: &mut TractEngine) -> Vec<Vec<u32>> {
-    let bytes = std::fs::read(common::bundle_dir().join("reference.safetensors")).unwrap();
-    let st = SafeTensors::deserialize(&bytes).unwrap();
-    let f32s = |name: &str| satmap_sim::cli::check_bundle::f32s(&st, name).unwrap();
-    let raw = |name: &str| st.tensor(name).unwrap().data().to_vec();
     let d = engine.dims().clone();
+    let r = ReferenceInputs::load(&common::bundle_dir(), &d).unwrap();
     let mut value = vec![0.0; d.value_len()];
     let mut query = vec![0.0; d.bev_len()];
     let mut weights = vec![0.0; d.weights_len()];
@@ -30,30 +27,18 @@ fn stage_outputs(engine: &mut TractEngine) -> Vec<Vec<u32>> {
     let mut satellite_bev = vec![0.0; d.bev_len()];
     let mut logits = vec![0.0; d.logits_len()];
     let mut points = vec![0.0; d.points_len()];
-    let can_bus: [f32; 18] = f32s("bev_query.can_bus").try_into().unwrap();
+    engine.encode_image(0, &r.image, &mut value).unwrap();
     engine
-        .encode_image(0, &raw("image_encoder.image"), &mut value)
+        .bev_query(&r.can_bus, &mut query, &mut weights)
         .unwrap();
     engine
-        .bev_query(&can_bus, &mut query, &mut weights)
+        .bev_encode(&r.query, &r.gathered, &mut camera_bev)
         .unwrap();
     engine
-        .bev_encode(
-            &f32s("bev_encoder.bev_query"),
-            &f32s("bev_encoder.gathered"),
-            &mut camera_bev,
-        )
+        .encode_satellite(&r.crop, &mut satellite_bev)
         .unwrap();
     engine
-        .encode_satellite(&raw("satellite_encoder.satellite"), &mut satellite_bev)
-        .unwrap();
-    engine
-        .decode_map(
-            &f32s("map_decoder.camera_bev"),
-            &f32s("map_decoder.satellite_bev"),
-            &mut logits,
-            &mut points,
-        )
+        .decode_map(&r.camera_bev, &r.satellite_bev, &mut logits, &mut points)
         .unwrap();
     [
         value,

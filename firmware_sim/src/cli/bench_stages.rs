@@ -16,6 +16,7 @@ use safetensors::SafeTensors;
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine::{Engine, Stage};
 use satmap_runtime::engine_tract::{TractEngine, kernel_family};
+use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::satellite::FixedCrop;
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
 use serde::Serialize;
@@ -66,11 +67,85 @@ pub struct StageTimes {
     pub max_rss_kib: u64,
 }
 
-fn reference_path(bundle: &Path) -> PathBuf {
-    if bundle.is_dir() {
-        bundle.join("reference.safetensors")
-    } else {
-        bundle.with_extension("").join("reference.safetensors")
+/// A stage's recorded inputs: `<bundle>/reference.safetensors`, or `<name>/reference.safetensors`
+/// beside a compiled `<name>.satmap`. Shared by this tool, the `stages` criterion bench and
+/// `tests/threads.rs`.
+#[derive(Debug, Clone)]
+pub struct ReferenceInputs {
+    /// `image_encoder.image`, u8 RGB `[image_h, image_w, 3]` (camera 0).
+    pub image: Vec<u8>,
+    /// `satellite_encoder.satellite`, u8 RGB `[sat_h, sat_w, 3]`.
+    pub crop: Vec<u8>,
+    /// `bev_query.can_bus`.
+    pub can_bus: [f32; 18],
+    /// `bev_encoder.bev_query`.
+    pub query: Vec<f32>,
+    /// `bev_encoder.gathered`.
+    pub gathered: Vec<f32>,
+    /// `map_decoder.camera_bev`.
+    pub camera_bev: Vec<f32>,
+    /// `map_decoder.satellite_bev`.
+    pub satellite_bev: Vec<f32>,
+}
+
+impl ReferenceInputs {
+    /// Read the reference of `bundle`, sized for `dims`.
+    ///
+    /// # Errors
+    /// The file unreadable or not safetensors, a tensor missing, of another size, or not finite.
+    pub fn load(bundle: &Path, dims: &ModelDims) -> Result<Self> {
+        let path = if bundle.is_dir() {
+            bundle.join("reference.safetensors")
+        } else {
+            bundle.with_extension("").join("reference.safetensors")
+        };
+        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        let st = SafeTensors::deserialize(&bytes).with_context(|| path.display().to_string())?;
+        let raw = |name: &str| -> Result<Vec<u8>> {
+            Ok(st
+                .tensor(name)
+                .with_context(|| format!("{}: no {name}", path.display()))?
+                .data()
+                .to_vec())
+        };
+        let bev = |name: &str| reference_f32s(&st, name, dims.bev_len());
+        Ok(Self {
+            image: raw("image_encoder.image")?,
+            crop: raw("satellite_encoder.satellite")?,
+            can_bus: reference_f32s(&st, "bev_query.can_bus", 18)?
+                .try_into()
+                .map_err(|_| anyhow::anyhow!("can_bus is not 18 values"))?,
+            query: bev("bev_encoder.bev_query")?,
+            gathered: bev("bev_encoder.gathered")?,
+            camera_bev: bev("map_decoder.camera_bev")?,
+            satellite_bev: bev("map_decoder.satellite_bev")?,
+        })
+    }
+}
+
+/// Frame `sequence` of a still scene: every camera shows `image` (`dims`' size), captured at the
+/// frame's time, so no camera goes stale however many frames are stepped.
+#[must_use]
+pub fn still_frame<'a>(sequence: u64, image: &'a [u8], dims: &ModelDims) -> Frame<'a> {
+    let timestamp_us = sequence * 100_000;
+    Frame {
+        sequence,
+        timestamp_us,
+        pose: EgoPose::new(DVec2::ZERO, 0.3),
+        motion: EgoMotion {
+            acceleration_mps2: Vec3::new(0.1, 0.4, 0.0),
+            rotation_rate_radps: Vec3::new(0.0, 0.0, 0.05),
+            velocity_mps: Vec3::new(0.0, 10.0, 0.0),
+        },
+        images: core::array::from_fn(|_| {
+            Some(CameraImage {
+                width_px: dims.image_w as u32,
+                height_px: dims.image_h as u32,
+                rgb: image,
+                capture_us: timestamp_us,
+                valid: true,
+            })
+        }),
     }
 }
 
@@ -107,27 +182,8 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
     }
     let mut engine = TractEngine::open(&args.bundle)?;
     engine.set_threads(args.threads)?;
-    let path = reference_path(&args.bundle);
-    let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-    let st = SafeTensors::deserialize(&bytes).with_context(|| path.display().to_string())?;
     let d = engine.dims().clone();
-    let raw = |name: &str| -> Result<Vec<u8>> {
-        Ok(st
-            .tensor(name)
-            .with_context(|| format!("{}: no {name}", path.display()))?
-            .data()
-            .to_vec())
-    };
-    let image = raw("image_encoder.image")?;
-    let crop = raw("satellite_encoder.satellite")?;
-    let can_bus: [f32; 18] = reference_f32s(&st, "bev_query.can_bus", 18)?
-        .try_into()
-        .map_err(|_| anyhow::anyhow!("can_bus is not 18 values"))?;
-    let query = reference_f32s(&st, "bev_encoder.bev_query", d.bev_len())?;
-    let gathered = reference_f32s(&st, "bev_encoder.gathered", d.bev_len())?;
-    let camera_bev = reference_f32s(&st, "map_decoder.camera_bev", d.bev_len())?;
-    let satellite_bev = reference_f32s(&st, "map_decoder.satellite_bev", d.bev_len())?;
-
+    let r = ReferenceInputs::load(&args.bundle, &d)?;
     let mut value = vec![0.0; d.value_len()];
     let mut q = vec![0.0; d.bev_len()];
     let mut w = vec![0.0; d.weights_len()];
@@ -139,12 +195,14 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
     for stage in Stage::ALL {
         let e = &mut engine;
         let times = match stage {
-            Stage::ImageEncoder => time_ms(n, || Ok(e.encode_image(0, &image, &mut value)?))?,
-            Stage::BevQuery => time_ms(n, || Ok(e.bev_query(&can_bus, &mut q, &mut w)?))?,
-            Stage::BevEncoder => time_ms(n, || Ok(e.bev_encode(&query, &gathered, &mut bev)?))?,
-            Stage::SatelliteEncoder => time_ms(n, || Ok(e.encode_satellite(&crop, &mut bev)?))?,
+            Stage::ImageEncoder => time_ms(n, || Ok(e.encode_image(0, &r.image, &mut value)?))?,
+            Stage::BevQuery => time_ms(n, || Ok(e.bev_query(&r.can_bus, &mut q, &mut w)?))?,
+            Stage::BevEncoder => {
+                time_ms(n, || Ok(e.bev_encode(&r.query, &r.gathered, &mut bev)?))?
+            }
+            Stage::SatelliteEncoder => time_ms(n, || Ok(e.encode_satellite(&r.crop, &mut bev)?))?,
             Stage::MapDecoder => time_ms(n, || {
-                Ok(e.decode_map(&camera_bev, &satellite_bev, &mut logits, &mut points)?)
+                Ok(e.decode_map(&r.camera_bev, &r.satellite_bev, &mut logits, &mut points)?)
             })?,
         };
         stages_ms.push((stage.name(), times));
@@ -158,33 +216,12 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
 
     let calibration = from_toml_file(&args.calibration)?;
     let threads = engine.threads().get();
-    let (step_ms, step_skipped) = match SatMap::new(engine, &calibration, FixedCrop(&crop)) {
+    let (step_ms, step_skipped) = match SatMap::new(engine, &calibration, FixedCrop(&r.crop)) {
         Ok(mut map) => {
-            let (width_px, height_px) = (d.image_w as u32, d.image_h as u32);
             let mut sequence = 0u64;
             let times = time_ms(n, || {
                 sequence += 1;
-                let timestamp_us = sequence * 100_000;
-                let frame = Frame {
-                    sequence,
-                    timestamp_us,
-                    pose: EgoPose::new(DVec2::ZERO, 0.3),
-                    motion: EgoMotion {
-                        acceleration_mps2: Vec3::new(0.1, 0.4, 0.0),
-                        rotation_rate_radps: Vec3::new(0.0, 0.0, 0.05),
-                        velocity_mps: Vec3::new(0.0, 10.0, 0.0),
-                    },
-                    images: core::array::from_fn(|_| {
-                        Some(CameraImage {
-                            width_px,
-                            height_px,
-                            rgb: &image,
-                            capture_us: timestamp_us,
-                            valid: true,
-                        })
-                    }),
-                };
-                map.step(&frame)?;
+                map.step(&still_frame(sequence, &r.image, &d))?;
                 Ok(())
             })?;
             (times, None)
