@@ -98,6 +98,33 @@ def weighted_axis_sum(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
     return acc
 
 
+def bilinear_corner_sum(rows: np.ndarray, x: np.ndarray, y: np.ndarray, attn: np.ndarray,
+                        h: int, w: int) -> np.ndarray:
+    """The runtime's native sampler (`engine_tract::bilinear::BilinearCornerSum`, which replaces
+    the exported graph of `bilinear_gather_sum` from the pixel coordinates on), bit for bit: the
+    same f32 operations in the same order as that graph, then `weighted_axis_sum`'s corner sum.
+
+    rows: [heads * h * w, dh] (head-major map rows); x, y: [N, heads, P] pixel coordinates
+    (`loc * size - 0.5`); attn: [N, heads, P]. Returns [N, heads, 1, dh]."""
+    f32 = np.float32
+    n, heads, _ = x.shape
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x1, y1 = x0 + f32(1.0), y0 + f32(1.0)
+    gx, gy = f32(1.0) - fx, f32(1.0) - fy
+    xs = np.concatenate([x0, x1, x0, x1], axis=-1)
+    ys = np.concatenate([y0, y0, y1, y1], axis=-1)
+    wc = np.concatenate([gx * gy, fx * gy, gx * fy, fx * fy], axis=-1)
+    inside = (xs >= f32(0)) & (xs <= f32(w - 1)) & (ys >= f32(0)) & (ys <= f32(h - 1))
+    wt = (wc * np.tile(attn, (1, 1, 4))) * inside.astype(f32)
+    xi = np.minimum(np.maximum(xs, f32(0)), f32(w - 1))
+    yi = np.minimum(np.maximum(ys, f32(0)), f32(h - 1))
+    head_off = (np.arange(heads, dtype=f32) * f32(h * w)).reshape(1, heads, 1)
+    flat = ((yi * f32(w) + xi) + head_off).astype(np.int64)
+    g = rows[flat.reshape(-1)].reshape(n, heads, xs.shape[-1], rows.shape[1])
+    return weighted_axis_sum(g, wt[..., None], 2)
+
+
 def kernel_golden(seed: int = 0) -> dict[str, np.ndarray]:
     """Vectors the Rust kernel is checked against bit for bit (`tests/native_kernels.rs`): the
     sampler's shape in small, `[N=6, heads=3, corners x points=8, dh=5]` with per-corner weights
@@ -111,7 +138,20 @@ def kernel_golden(seed: int = 0) -> dict[str, np.ndarray]:
     data = (rng.standard_normal((20, 5)).astype(np.float32)
             * np.float32(10.0) ** rng.integers(-3, 4, size=(20, 5)).astype(np.float32))
     indices = rng.integers(0, 20, size=6 * 3 * 8).astype(np.int64)
+    # The whole sampler over a 5 x 4 map, 3 heads, 6 points: coordinates spread past every edge
+    # (so corners fall outside and are clamped and masked), some exactly on integers.
+    srng = np.random.default_rng(seed + 1)
+    sh, sw, heads, pts, dh = 5, 4, 3, 6, 7
+    rows = (srng.standard_normal((heads * sh * sw, dh))
+            * np.float32(10.0) ** srng.integers(-2, 3, size=(heads * sh * sw, dh))).astype(np.float32)
+    sx = srng.uniform(-1.7, sw + 0.7, size=(9, heads, pts)).astype(np.float32)
+    sy = srng.uniform(-1.7, sh + 0.7, size=(9, heads, pts)).astype(np.float32)
+    sx[0, 0, :3] = [0.0, -1.0, float(sw - 1)]
+    sy[0, 0, :3] = [float(sh - 1), 0.0, -1.0]
+    sattn = srng.uniform(0.0, 1.0, size=(9, heads, pts)).astype(np.float32)
     return {
+        "sampler_rows": rows, "sampler_x": sx, "sampler_y": sy, "sampler_attn": sattn,
+        "sampler_out": bilinear_corner_sum(rows, sx, sy, sattn, sh, sw),
         "a": a, "b": b, "out": weighted_axis_sum(a, b, 2),
         "data": data, "indices": indices,
         "gathered_out": weighted_axis_sum(data[indices].reshape(6, 3, 8, 5), b, 2),

@@ -21,6 +21,8 @@ use std::sync::Arc;
 
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
+pub mod bilinear;
+pub mod softmax;
 pub mod weighted_sum;
 
 use tract_nnef::framework::Nnef;
@@ -101,6 +103,10 @@ struct StageRunner {
     output_lens: Vec<usize>,
     /// `Mul -> Reduce<Sum>` pairs rewritten into the native [`weighted_sum::WeightedAxisSum`].
     fused_sums: usize,
+    /// `Softmax` nodes rewritten into the native [`softmax::RowSoftmax`].
+    row_softmaxes: usize,
+    /// Bilinear samplers rewritten into the native [`bilinear::BilinearCornerSum`].
+    samplers: usize,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
 }
@@ -121,6 +127,10 @@ impl StageRunner {
             .into_decluttered()
             .and_then(weighted_sum::fuse_weighted_sums)
             .map_err(engine_err)?;
+        // `softmax::fuse_softmaxes` (2-20x faster softmaxes) changes the last bits of the
+        // outputs: it waits for the per-family digests to be re-blessed (docs/perf.md).
+        let row_softmaxes = 0;
+        let (model, samplers) = bilinear::fuse_bilinear_samplers(model).map_err(engine_err)?;
         let plan = model
             .into_optimized()
             .and_then(|m| m.into_runnable())
@@ -149,6 +159,8 @@ impl StageRunner {
             inputs,
             output_lens,
             fused_sums,
+            row_softmaxes,
+            samplers,
             last_error: None,
         })
     }
@@ -537,6 +549,21 @@ impl TractEngine {
     #[must_use]
     pub fn fused_weighted_sums(&self, stage: Stage) -> usize {
         self.runners.get(stage as usize).map_or(0, |r| r.fused_sums)
+    }
+
+    /// How many `Softmax` nodes of `stage` run as the native [`softmax::RowSoftmax`].
+    #[must_use]
+    pub fn row_softmaxes(&self, stage: Stage) -> usize {
+        self.runners
+            .get(stage as usize)
+            .map_or(0, |r| r.row_softmaxes)
+    }
+
+    /// How many deformable samplers of `stage` run whole as the native
+    /// [`bilinear::BilinearCornerSum`] (their corner sums among [`Self::fused_weighted_sums`]).
+    #[must_use]
+    pub fn bilinear_samplers(&self, stage: Stage) -> usize {
+        self.runners.get(stage as usize).map_or(0, |r| r.samplers)
     }
 
     /// Threads the stages run on (see [`TractEngine::set_threads`]).

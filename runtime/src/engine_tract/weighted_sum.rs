@@ -601,12 +601,16 @@ mod tests {
         assert_eq!(engine.fused_weighted_sums(Stage::BevQuery), 1);
         // One cross-attention per decoder layer (`test` has 2).
         assert_eq!(engine.fused_weighted_sums(Stage::MapDecoder), 2);
+        // ... and each of those whole, from the pixel coordinates on (`bilinear`).
+        assert_eq!(engine.bilinear_samplers(Stage::BevQuery), 1);
+        assert_eq!(engine.bilinear_samplers(Stage::MapDecoder), 2);
         for stage in [
             Stage::ImageEncoder,
             Stage::BevEncoder,
             Stage::SatelliteEncoder,
         ] {
             assert_eq!(engine.fused_weighted_sums(stage), 0, "{stage}");
+            assert_eq!(engine.bilinear_samplers(stage), 0, "{stage}");
         }
     }
 }
