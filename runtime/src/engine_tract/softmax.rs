@@ -70,7 +70,6 @@ impl EvalOp for RowSoftmax {
             }
             Ok(())
         })?;
-        drop(plain);
         Ok(tvec!(output.into_tvalue()))
     }
 }
