@@ -103,8 +103,6 @@ struct StageRunner {
     output_lens: Vec<usize>,
     /// `Mul -> Reduce<Sum>` pairs rewritten into the native [`weighted_sum::WeightedAxisSum`].
     fused_sums: usize,
-    /// `Softmax` nodes rewritten into the native [`softmax::RowSoftmax`].
-    row_softmaxes: usize,
     /// Bilinear samplers rewritten into the native [`bilinear::BilinearCornerSum`].
     samplers: usize,
     /// tract's message of the last failed run (the core error carries only a code).
@@ -127,9 +125,8 @@ impl StageRunner {
             .into_decluttered()
             .and_then(weighted_sum::fuse_weighted_sums)
             .map_err(engine_err)?;
-        // `softmax::fuse_softmaxes` (2-20x faster softmaxes) changes the last bits of the
-        // outputs: it waits for the per-family digests to be re-blessed (docs/perf.md).
-        let row_softmaxes = 0;
+        // Not yet `softmax::fuse_softmaxes` (2-20x faster softmaxes): it changes the outputs'
+        // last bits, so it waits for the per-family digests to be re-blessed (issue 11).
         let (model, samplers) = bilinear::fuse_bilinear_samplers(model).map_err(engine_err)?;
         let plan = model
             .into_optimized()
@@ -159,7 +156,6 @@ impl StageRunner {
             inputs,
             output_lens,
             fused_sums,
-            row_softmaxes,
             samplers,
             last_error: None,
         })
@@ -549,14 +545,6 @@ impl TractEngine {
     #[must_use]
     pub fn fused_weighted_sums(&self, stage: Stage) -> usize {
         self.runners.get(stage as usize).map_or(0, |r| r.fused_sums)
-    }
-
-    /// How many `Softmax` nodes of `stage` run as the native [`softmax::RowSoftmax`].
-    #[must_use]
-    pub fn row_softmaxes(&self, stage: Stage) -> usize {
-        self.runners
-            .get(stage as usize)
-            .map_or(0, |r| r.row_softmaxes)
     }
 
     /// How many deformable samplers of `stage` run whole as the native
