@@ -414,40 +414,21 @@ mod tests {
     //! rewrite against the unfused graph of the committed default bundle, both bit for bit.
 
     use super::*;
-    use crate::bundle::Bundle;
     use crate::engine::Stage;
-    use crate::engine_tract::{nnef_model, softmax, weighted_sum};
+    use crate::engine_tract::test_support::{
+        bits, committed_stage, golden_tensor, inputs_of, kernel_golden, run_optimized,
+    };
+    use crate::engine_tract::{softmax, weighted_sum};
 
-    fn root() -> std::path::PathBuf {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-    }
-
-    fn golden_tensor(st: &safetensors::SafeTensors<'_>, name: &str) -> Tensor {
-        let t = st.tensor(name).expect("golden tensor");
-        assert_eq!(t.dtype(), safetensors::Dtype::F32, "{name}");
-        let v: Vec<f32> = t
-            .data()
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
-        Tensor::from_shape(t.shape(), &v).expect("tensor")
-    }
-
-    fn bits(t: &Tensor) -> Vec<u32> {
-        let plain = t.try_as_plain_ram().expect("plain");
-        plain
-            .as_slice::<f32>()
-            .expect("f32")
-            .iter()
-            .map(|v| v.to_bits())
-            .collect()
+    /// The decluttered stage of the committed bundle with the engine's other rewrites applied.
+    fn stage_model(stage: Stage) -> TypedModel {
+        let (m, _) = weighted_sum::fuse_weighted_sums(committed_stage(stage)).expect("sums");
+        softmax::fuse_softmaxes(m).expect("softmaxes").0
     }
 
     #[test]
     fn the_kernel_is_the_python_reference_bit_for_bit() {
-        let bytes =
-            std::fs::read(root().join("models/golden/kernels/weighted_axis_sum.safetensors"))
-                .expect("kernel golden (python -m satmap_ref.sampling)");
+        let bytes = kernel_golden();
         let st = safetensors::SafeTensors::deserialize(&bytes).expect("safetensors");
         let inputs: TVec<TValue> = ["sampler_rows", "sampler_x", "sampler_y", "sampler_attn"]
             .iter()
@@ -468,48 +449,6 @@ mod tests {
         assert!(format!("{err:#}").contains("rows"), "{err:#}");
     }
 
-    /// The decluttered stage of the committed bundle with the engine's other rewrites applied.
-    fn stage_model(stage: Stage) -> TypedModel {
-        let bundle = Bundle::open(root().join("models/bundles/test.satmap")).expect("bundle");
-        let bytes = bundle.read_stage(stage).expect("stage bytes");
-        let entry = bundle.manifest().stage(stage).expect("entry");
-        let nnef = tract_nnef::nnef();
-        let m = nnef_model(stage, &nnef, &bytes, entry, bundle.manifest().precision)
-            .expect("model")
-            .into_decluttered()
-            .expect("declutter");
-        let (m, _) = weighted_sum::fuse_weighted_sums(m).expect("sums");
-        softmax::fuse_softmaxes(m).expect("softmaxes").0
-    }
-
-    /// Deterministic inputs spread over [-2, 2): enough to drive samples past the map edges.
-    fn inputs_of(model: &TypedModel) -> TVec<TValue> {
-        model
-            .input_outlets()
-            .expect("inputs")
-            .iter()
-            .map(|&o| {
-                let shape = model
-                    .outlet_fact(o)
-                    .expect("fact")
-                    .shape
-                    .as_concrete()
-                    .expect("static")
-                    .to_vec();
-                let n: usize = shape.iter().product();
-                let v: Vec<f32> = (0..n as u32)
-                    .map(|i| {
-                        (i.wrapping_mul(2_654_435_761) >> 8) as f32 / (1u32 << 24) as f32 * 4.0
-                            - 2.0
-                    })
-                    .collect();
-                Tensor::from_shape(&shape, &v)
-                    .expect("tensor")
-                    .into_tvalue()
-            })
-            .collect()
-    }
-
     #[test]
     fn fused_samplers_compute_the_unfused_graph_bit_for_bit() {
         for (stage, samplers) in [(Stage::BevQuery, 1), (Stage::MapDecoder, 2)] {
@@ -526,13 +465,7 @@ mod tests {
                 "{stage}: every corner sum is inside a fused sampler"
             );
             let inputs = inputs_of(&plain);
-            let run = |m: TypedModel| {
-                m.into_optimized()
-                    .and_then(|m| m.into_runnable())
-                    .and_then(|p| p.run(inputs.clone()))
-                    .expect("run")
-            };
-            let (a, b) = (run(plain), run(fused));
+            let (a, b) = (run_optimized(plain, &inputs), run_optimized(fused, &inputs));
             assert_eq!(a.len(), b.len());
             for (x, y) in a.iter().zip(&b) {
                 assert_eq!(bits(x), bits(y), "{stage}");

@@ -23,6 +23,8 @@ use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
 pub mod bilinear;
 pub mod softmax;
+#[cfg(test)]
+mod test_support;
 pub mod weighted_sum;
 
 use tract_nnef::framework::Nnef;
@@ -105,6 +107,8 @@ struct StageRunner {
     fused_sums: usize,
     /// Bilinear samplers rewritten into the native [`bilinear::BilinearCornerSum`].
     samplers: usize,
+    /// Softmaxes rewritten into the native [`softmax::RowSoftmax`].
+    softmaxes: usize,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
 }
@@ -125,9 +129,8 @@ impl StageRunner {
             .into_decluttered()
             .and_then(weighted_sum::fuse_weighted_sums)
             .map_err(engine_err)?;
-        // Not yet `softmax::fuse_softmaxes` (2-20x faster softmaxes): it changes the outputs'
-        // last bits, so it waits for the per-family digests to be re-blessed (issue 11).
         let (model, samplers) = bilinear::fuse_bilinear_samplers(model).map_err(engine_err)?;
+        let (model, softmaxes) = softmax::fuse_softmaxes(model).map_err(engine_err)?;
         let plan = model
             .into_optimized()
             .and_then(|m| m.into_runnable())
@@ -157,6 +160,7 @@ impl StageRunner {
             output_lens,
             fused_sums,
             samplers,
+            softmaxes,
             last_error: None,
         })
     }
@@ -552,6 +556,13 @@ impl TractEngine {
     #[must_use]
     pub fn bilinear_samplers(&self, stage: Stage) -> usize {
         self.runners.get(stage as usize).map_or(0, |r| r.samplers)
+    }
+
+    /// How many softmaxes of `stage` run as the native [`softmax::RowSoftmax`] (bit-identical
+    /// to tract's; 0 on a host whose softmax kernel it does not model).
+    #[must_use]
+    pub fn row_softmaxes(&self, stage: Stage) -> usize {
+        self.runners.get(stage as usize).map_or(0, |r| r.softmaxes)
     }
 
     /// Threads the stages run on (see [`TractEngine::set_threads`]).

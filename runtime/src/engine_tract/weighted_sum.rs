@@ -432,34 +432,10 @@ mod tests {
     use super::*;
     use crate::engine::Stage;
     use crate::engine_tract::TractEngine;
+    use crate::engine_tract::test_support::{
+        bits, golden_tensor as tensor, kernel_golden as golden,
+    };
     use tract_nnef::tract_core::ops::math::mul;
-
-    fn golden() -> Vec<u8> {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        std::fs::read(root.join("models/golden/kernels/weighted_axis_sum.safetensors"))
-            .expect("kernel golden (python -m satmap_ref.sampling)")
-    }
-
-    fn tensor(st: &safetensors::SafeTensors<'_>, name: &str) -> Tensor {
-        let t = st.tensor(name).expect("golden tensor");
-        let dt = match t.dtype() {
-            safetensors::Dtype::F32 => f32::datum_type(),
-            safetensors::Dtype::I64 => i64::datum_type(),
-            other => panic!("{name}: {other:?}"),
-        };
-        // SAFETY-free: `from_raw_dt` copies the little-endian bytes of a plain dtype.
-        unsafe { Tensor::from_raw_dt(dt, t.shape(), t.data()) }.expect("tensor")
-    }
-
-    fn bits(t: &Tensor) -> Vec<u32> {
-        t.try_as_plain_ram()
-            .unwrap()
-            .as_slice::<f32>()
-            .unwrap()
-            .iter()
-            .map(|x| x.to_bits())
-            .collect()
-    }
 
     /// `Mul -> Reduce<Sum>(2)` over `a` (optionally a row gather) and `b`, rewritten.
     fn fused_model(gathered: bool) -> (TypedModel, usize) {
@@ -595,7 +571,7 @@ mod tests {
     }
 
     #[test]
-    fn both_samplers_of_the_default_bundle_run_natively() {
+    fn the_samplers_and_softmaxes_of_the_default_bundle_run_natively() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let engine = TractEngine::open(root.join("models/bundles/test.satmap")).unwrap();
         assert_eq!(engine.fused_weighted_sums(Stage::BevQuery), 1);
@@ -604,6 +580,16 @@ mod tests {
         // ... and each of those whole, from the pixel coordinates on (`bilinear`).
         assert_eq!(engine.bilinear_samplers(Stage::BevQuery), 1);
         assert_eq!(engine.bilinear_samplers(Stage::MapDecoder), 2);
+        // Every softmax runs as the native row softmax (counts as in `softmax`'s tests).
+        for (stage, n) in [
+            (Stage::ImageEncoder, 0),
+            (Stage::BevQuery, 2),
+            (Stage::SatelliteEncoder, 5),
+            (Stage::BevEncoder, 0),
+            (Stage::MapDecoder, 4),
+        ] {
+            assert_eq!(engine.row_softmaxes(stage), n, "{stage}");
+        }
         for stage in [
             Stage::ImageEncoder,
             Stage::BevEncoder,

@@ -1,0 +1,91 @@
+//! What the native-kernel tests of `engine_tract` share: the committed files they read, the
+//! committed bundle's stages as tract models, deterministic inputs, and bitwise views.
+
+use tract_nnef::internal::*;
+
+use crate::bundle::Bundle;
+use crate::engine::Stage;
+use crate::engine_tract::nnef_model;
+
+/// The repository root (the runtime crate's parent).
+pub(crate) fn root() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The committed kernel goldens (`python -m satmap_ref.sampling`).
+pub(crate) fn kernel_golden() -> Vec<u8> {
+    std::fs::read(root().join("models/golden/kernels/weighted_axis_sum.safetensors"))
+        .expect("kernel golden (python -m satmap_ref.sampling)")
+}
+
+/// Golden tensor `name` (f32 or i64, little-endian) as a tract tensor.
+pub(crate) fn golden_tensor(st: &safetensors::SafeTensors<'_>, name: &str) -> Tensor {
+    let t = st.tensor(name).expect("golden tensor");
+    let dt = match t.dtype() {
+        safetensors::Dtype::F32 => f32::datum_type(),
+        safetensors::Dtype::I64 => i64::datum_type(),
+        other => panic!("{name}: {other:?}"),
+    };
+    // `from_raw_dt` copies the little-endian bytes of a plain dtype.
+    unsafe { Tensor::from_raw_dt(dt, t.shape(), t.data()) }.expect("tensor")
+}
+
+/// The bits of an f32 tensor's values.
+pub(crate) fn bits(t: &Tensor) -> Vec<u32> {
+    t.try_as_plain_ram()
+        .expect("plain")
+        .as_slice::<f32>()
+        .expect("f32")
+        .iter()
+        .map(|v| v.to_bits())
+        .collect()
+}
+
+/// `stage` of the committed default bundle, decluttered, before any of the engine's rewrites.
+pub(crate) fn committed_stage(stage: Stage) -> TypedModel {
+    let bundle = Bundle::open(root().join("models/bundles/test.satmap")).expect("bundle");
+    let bytes = bundle.read_stage(stage).expect("stage bytes");
+    let entry = bundle.manifest().stage(stage).expect("entry");
+    let nnef = tract_nnef::nnef();
+    nnef_model(stage, &nnef, &bytes, entry, bundle.manifest().precision)
+        .expect("model")
+        .into_decluttered()
+        .expect("declutter")
+}
+
+/// Deterministic inputs: f32 spread over [-2, 2) (enough to drive samples past the map edges),
+/// u8 over the whole byte range (camera pixels), i64 0 (the first camera's index).
+pub(crate) fn inputs_of(model: &TypedModel) -> TVec<TValue> {
+    model
+        .input_outlets()
+        .expect("inputs")
+        .iter()
+        .map(|&o| {
+            let fact = model.outlet_fact(o).expect("fact");
+            let shape = fact.shape.as_concrete().expect("static").to_vec();
+            let n: usize = shape.iter().product();
+            let hash = (0..n as u32).map(|i| i.wrapping_mul(2_654_435_761) >> 8);
+            let t = if fact.datum_type == i64::datum_type() {
+                Tensor::from_shape(&shape, &vec![0i64; n])
+            } else if fact.datum_type == u8::datum_type() {
+                let v: Vec<u8> = hash.map(|h| (h & 0xff) as u8).collect();
+                Tensor::from_shape(&shape, &v)
+            } else {
+                let v: Vec<f32> = hash
+                    .map(|h| h as f32 / (1u32 << 24) as f32 * 4.0 - 2.0)
+                    .collect();
+                Tensor::from_shape(&shape, &v)
+            };
+            t.expect("tensor").into_tvalue()
+        })
+        .collect()
+}
+
+/// `model` optimised and run once on `inputs`, as the engine plans it.
+pub(crate) fn run_optimized(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TValue> {
+    model
+        .into_optimized()
+        .and_then(|m| m.into_runnable())
+        .and_then(|p| p.run(inputs.clone()))
+        .expect("run")
+}
