@@ -22,6 +22,7 @@ use std::sync::Arc;
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
 pub mod bilinear;
+pub mod fold;
 pub mod softmax;
 #[cfg(test)]
 mod test_support;
@@ -109,6 +110,8 @@ struct StageRunner {
     samplers: usize,
     /// Softmaxes rewritten into the native [`softmax::RowSoftmax`].
     softmaxes: usize,
+    /// Outlets of the optimised plan computed once at load ([`fold::fold_input_independent`]).
+    folded: usize,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
 }
@@ -131,10 +134,11 @@ impl StageRunner {
             .map_err(engine_err)?;
         let (model, samplers) = bilinear::fuse_bilinear_samplers(model).map_err(engine_err)?;
         let (model, softmaxes) = softmax::fuse_softmaxes(model).map_err(engine_err)?;
-        let plan = model
+        let (model, folded) = model
             .into_optimized()
-            .and_then(|m| m.into_runnable())
+            .and_then(fold::fold_input_independent)
             .map_err(engine_err)?;
+        let plan = model.into_runnable().map_err(engine_err)?;
         check_graph_io(
             stage,
             plan.model(),
@@ -161,6 +165,7 @@ impl StageRunner {
             fused_sums,
             samplers,
             softmaxes,
+            folded,
             last_error: None,
         })
     }
@@ -528,6 +533,7 @@ impl TractEngine {
                 let t = std::time::Instant::now();
                 let out = tract_nnef::tract_core::plan::eval(ctx, op_state, node, node_inputs);
                 let ms = t.elapsed().as_secs_f64() * 1e3;
+
                 let name = node.op().name();
                 match totals.iter_mut().find(|(n, _)| n.as_str() == name.as_ref()) {
                     Some((_, total)) => *total += ms,
@@ -563,6 +569,13 @@ impl TractEngine {
     #[must_use]
     pub fn row_softmaxes(&self, stage: Stage) -> usize {
         self.runners.get(stage as usize).map_or(0, |r| r.softmaxes)
+    }
+
+    /// How many outlets of `stage`'s optimised plan depend on its weights alone and were
+    /// computed once at load ([`fold::fold_input_independent`]).
+    #[must_use]
+    pub fn folded_outlets(&self, stage: Stage) -> usize {
+        self.runners.get(stage as usize).map_or(0, |r| r.folded)
     }
 
     /// Threads the stages run on (see [`TractEngine::set_threads`]).

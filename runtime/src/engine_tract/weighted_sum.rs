@@ -590,6 +590,16 @@ mod tests {
         ] {
             assert_eq!(engine.row_softmaxes(stage), n, "{stage}");
         }
+        // The decoder's layer-0 self-attention reads its learned queries only: computed at load.
+        for (stage, n) in [
+            (Stage::ImageEncoder, 0),
+            (Stage::BevQuery, 0),
+            (Stage::SatelliteEncoder, 0),
+            (Stage::BevEncoder, 0),
+            (Stage::MapDecoder, 4),
+        ] {
+            assert_eq!(engine.folded_outlets(stage), n, "{stage}");
+        }
         for stage in [
             Stage::ImageEncoder,
             Stage::BevEncoder,
