@@ -22,6 +22,7 @@ use std::sync::Arc;
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
 pub mod bilinear;
+pub mod broadcast;
 pub mod fold;
 pub mod softmax;
 #[cfg(test)]
@@ -112,6 +113,8 @@ struct StageRunner {
     softmaxes: usize,
     /// Outlets of the optimised plan computed once at load ([`fold::fold_input_independent`]).
     folded: usize,
+    /// Binary ops rewritten into the native [`broadcast::BroadcastBinary`].
+    binaries: usize,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
 }
@@ -138,6 +141,7 @@ impl StageRunner {
             .into_optimized()
             .and_then(fold::fold_input_independent)
             .map_err(engine_err)?;
+        let (model, binaries) = broadcast::fuse_broadcast_binaries(model).map_err(engine_err)?;
         let plan = model.into_runnable().map_err(engine_err)?;
         check_graph_io(
             stage,
@@ -166,6 +170,7 @@ impl StageRunner {
             samplers,
             softmaxes,
             folded,
+            binaries,
             last_error: None,
         })
     }
@@ -576,6 +581,13 @@ impl TractEngine {
     #[must_use]
     pub fn folded_outlets(&self, stage: Stage) -> usize {
         self.runners.get(stage as usize).map_or(0, |r| r.folded)
+    }
+
+    /// How many `Add`, `Sub` and `Mul` of `stage` left on tract's generic path run as the native
+    /// [`broadcast::BroadcastBinary`].
+    #[must_use]
+    pub fn broadcast_binaries(&self, stage: Stage) -> usize {
+        self.runners.get(stage as usize).map_or(0, |r| r.binaries)
     }
 
     /// Threads the stages run on (see [`TractEngine::set_threads`]).

@@ -600,6 +600,16 @@ mod tests {
         ] {
             assert_eq!(engine.folded_outlets(stage), n, "{stage}");
         }
+        // Binary ops left on tract's generic path (counts as in `broadcast`'s tests).
+        for (stage, n) in [
+            (Stage::ImageEncoder, 2),
+            (Stage::BevQuery, 4),
+            (Stage::SatelliteEncoder, 31),
+            (Stage::BevEncoder, 0),
+            (Stage::MapDecoder, 2),
+        ] {
+            assert_eq!(engine.broadcast_binaries(stage), n, "{stage}");
+        }
         for stage in [
             Stage::ImageEncoder,
             Stage::BevEncoder,
