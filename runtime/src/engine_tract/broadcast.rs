@@ -73,103 +73,99 @@ impl BroadcastBinary {
 
 /// `op` over `a` and `b` broadcast to their common shape.
 fn walk(a: &Tensor, b: &Tensor, op: impl Fn(f32, f32) -> f32) -> TractResult<Tensor> {
+    ensure!(
+        a.rank() == b.rank(),
+        "BroadcastBinary over ranks {} and {}",
+        a.rank(),
+        b.rank()
+    );
+    let shape = tract_nnef::tract_core::broadcast::multi_broadcast(&[a.shape(), b.shape()])
+        .context("operands that do not broadcast")?;
+    let sa = steps(a.shape(), &shape);
+    let sb = steps(b.shape(), &shape);
+    let mut out = Tensor::zero::<f32>(&shape)?;
+    let (pa, pb) = (a.try_as_plain_ram()?, b.try_as_plain_ram()?);
+    let (xa, xb) = (pa.as_slice::<f32>()?, pb.as_slice::<f32>()?);
+    let mut po = out.try_as_plain_ram_mut()?;
+    let y = po.as_slice_mut::<f32>()?;
+    if y.is_empty() {
+        return Ok(out);
+    }
+    // The block: the trailing axes, until it holds BLOCK_VALUES values (at least the last
+    // axis, at most BLOCK_MAX values beyond it). Each operand's offsets within it are
+    // tabled once; the outer axes are walked by an odometer, once per block.
+    let rank = shape.len();
+    let mut inner = rank;
+    let mut block = 1usize;
+    while inner > 0
+        && (inner == rank || (block < BLOCK_VALUES && block * shape[inner - 1] <= BLOCK_MAX))
     {
-        ensure!(
-            a.rank() == b.rank(),
-            "BroadcastBinary over ranks {} and {}",
-            a.rank(),
-            b.rank()
-        );
-        let shape = tract_nnef::tract_core::broadcast::multi_broadcast(&[a.shape(), b.shape()])
-            .context("operands that do not broadcast")?;
-        let sa = steps(a.shape(), &shape);
-        let sb = steps(b.shape(), &shape);
-        let mut out = Tensor::zero::<f32>(&shape)?;
-        let (pa, pb) = (a.try_as_plain_ram()?, b.try_as_plain_ram()?);
-        let (xa, xb) = (pa.as_slice::<f32>()?, pb.as_slice::<f32>()?);
-        let mut po = out.try_as_plain_ram_mut()?;
-        let y = po.as_slice_mut::<f32>()?;
-        if y.is_empty() {
-            drop(po);
-            return Ok(out);
-        }
-        // The block: the trailing axes, until it holds BLOCK_VALUES values (at least the last
-        // axis, at most BLOCK_MAX values beyond it). Each operand's offsets within it are tabled once; the outer axes are walked by
-        // an odometer, once per block.
-        let rank = shape.len();
-        let mut inner = rank;
-        let mut block = 1usize;
-        while inner > 0
-            && (inner == rank || (block < BLOCK_VALUES && block * shape[inner - 1] <= BLOCK_MAX))
-        {
-            inner -= 1;
-            block *= shape[inner];
-        }
-        let table = |steps: &[usize]| -> Vec<usize> {
-            let mut t = Vec::with_capacity(block);
-            let mut idx = vec![0usize; rank - inner];
-            let mut off = 0usize;
-            for _ in 0..block {
-                t.push(off);
-                for ax in (0..idx.len()).rev() {
-                    let (n, st) = (shape[inner + ax], steps[inner + ax]);
-                    idx[ax] += 1;
-                    off += st;
-                    if idx[ax] < n {
-                        break;
-                    }
-                    off -= st * n;
-                    idx[ax] = 0;
-                }
-            }
-            t
-        };
-        let (oa, ob) = (table(&sa), table(&sb));
-        let (ta, tb) = (Operand::of(&oa), Operand::of(&ob));
-        let mut idx = vec![0usize; inner];
-        let (mut ia, mut ib) = (0usize, 0usize);
-        for out_block in y.chunks_exact_mut(block) {
-            match (&ta, &tb) {
-                (Operand::Contiguous, Operand::Contiguous) => {
-                    let (ar, br) = (&xa[ia..][..block], &xb[ib..][..block]);
-                    for ((o, &p), &q) in out_block.iter_mut().zip(ar).zip(br) {
-                        *o = op(p, q);
-                    }
-                }
-                (Operand::Contiguous, Operand::Scalar) => {
-                    let q = xb[ib];
-                    for (o, &p) in out_block.iter_mut().zip(&xa[ia..][..block]) {
-                        *o = op(p, q);
-                    }
-                }
-                (Operand::Scalar, Operand::Contiguous) => {
-                    let p = xa[ia];
-                    for (o, &q) in out_block.iter_mut().zip(&xb[ib..][..block]) {
-                        *o = op(p, q);
-                    }
-                }
-                _ => {
-                    let (ar, br) = (&xa[ia..], &xb[ib..]);
-                    for ((o, &ja), &jb) in out_block.iter_mut().zip(&oa).zip(&ob) {
-                        *o = op(ar[ja], br[jb]);
-                    }
-                }
-            }
-            for ax in (0..inner).rev() {
+        inner -= 1;
+        block *= shape[inner];
+    }
+    let table = |steps: &[usize]| -> Vec<usize> {
+        let mut t = Vec::with_capacity(block);
+        let mut idx = vec![0usize; rank - inner];
+        let mut off = 0usize;
+        for _ in 0..block {
+            t.push(off);
+            for ax in (0..idx.len()).rev() {
+                let (n, st) = (shape[inner + ax], steps[inner + ax]);
                 idx[ax] += 1;
-                ia += sa[ax];
-                ib += sb[ax];
-                if idx[ax] < shape[ax] {
+                off += st;
+                if idx[ax] < n {
                     break;
                 }
-                ia -= sa[ax] * shape[ax];
-                ib -= sb[ax] * shape[ax];
+                off -= st * n;
                 idx[ax] = 0;
             }
         }
-        drop(po);
-        Ok(out)
+        t
+    };
+    let (oa, ob) = (table(&sa), table(&sb));
+    let (ta, tb) = (Operand::of(&oa), Operand::of(&ob));
+    let mut idx = vec![0usize; inner];
+    let (mut ia, mut ib) = (0usize, 0usize);
+    for out_block in y.chunks_exact_mut(block) {
+        match (&ta, &tb) {
+            (Operand::Contiguous, Operand::Contiguous) => {
+                let (ar, br) = (&xa[ia..][..block], &xb[ib..][..block]);
+                for ((o, &p), &q) in out_block.iter_mut().zip(ar).zip(br) {
+                    *o = op(p, q);
+                }
+            }
+            (Operand::Contiguous, Operand::Scalar) => {
+                let q = xb[ib];
+                for (o, &p) in out_block.iter_mut().zip(&xa[ia..][..block]) {
+                    *o = op(p, q);
+                }
+            }
+            (Operand::Scalar, Operand::Contiguous) => {
+                let p = xa[ia];
+                for (o, &q) in out_block.iter_mut().zip(&xb[ib..][..block]) {
+                    *o = op(p, q);
+                }
+            }
+            _ => {
+                let (ar, br) = (&xa[ia..], &xb[ib..]);
+                for ((o, &ja), &jb) in out_block.iter_mut().zip(&oa).zip(&ob) {
+                    *o = op(ar[ja], br[jb]);
+                }
+            }
+        }
+        for ax in (0..inner).rev() {
+            idx[ax] += 1;
+            ia += sa[ax];
+            ib += sb[ax];
+            if idx[ax] < shape[ax] {
+                break;
+            }
+            ia -= sa[ax] * shape[ax];
+            ib -= sb[ax] * shape[ax];
+            idx[ax] = 0;
+        }
     }
+    Ok(out)
 }
 
 /// Values of an output block (trailing axes) at least this many, where the axes allow.
@@ -243,7 +239,7 @@ pub fn fuse_broadcast_binaries(mut model: TypedModel) -> TractResult<(TypedModel
         let Some(bin) = node.op_as::<TypedBinOp>() else {
             continue;
         };
-        let Some(kind) = BinaryKind::of(&bin.0.name()) else {
+        let Some(kind) = BinaryKind::of(bin.0.name()) else {
             continue;
         };
         let plain = |f: &TypedFact| {

@@ -79,7 +79,6 @@ impl RowSoftmax {
             }
             Ok(())
         })?;
-        drop(plain);
         Ok(t)
     }
 }
