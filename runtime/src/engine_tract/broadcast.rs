@@ -6,7 +6,8 @@
 //! `[1, 3, H, W] - [1, 3, 1, 1]`, stays on its generic path: an ndarray zip at ~20 ns a value
 //! (9 ms for that one `Add` on an AVX2 EPYC). After optimisation, [`fuse_broadcast_binaries`]
 //! rewrites what is left of those three ops into [`BroadcastBinary`], which walks the output
-//! row by row (a row being the innermost axis, each operand stepping 1 or 0 along it).
+//! by blocks of trailing axes, each operand read contiguously, as one value, or through a table
+//! of its offsets within the block.
 //!
 //! Bit for bit: each output value is the one IEEE operation on the same two values, whatever
 //! the walk (`Div` is left to tract, whose kernels may multiply by a reciprocal).
@@ -106,27 +107,19 @@ fn walk(a: &Tensor, b: &Tensor, op: impl Fn(f32, f32) -> f32) -> TractResult<Ten
     let table = |steps: &[usize]| -> Vec<usize> {
         let mut t = Vec::with_capacity(block);
         let mut idx = vec![0usize; rank - inner];
-        let mut off = 0usize;
+        let mut off = [0usize];
         for _ in 0..block {
-            t.push(off);
-            for ax in (0..idx.len()).rev() {
-                let (n, st) = (shape[inner + ax], steps[inner + ax]);
-                idx[ax] += 1;
-                off += st;
-                if idx[ax] < n {
-                    break;
-                }
-                off -= st * n;
-                idx[ax] = 0;
-            }
+            t.push(off[0]);
+            advance(&mut idx, &shape[inner..], [&steps[inner..]], &mut off);
         }
         t
     };
     let (oa, ob) = (table(&sa), table(&sb));
     let (ta, tb) = (Operand::of(&oa), Operand::of(&ob));
     let mut idx = vec![0usize; inner];
-    let (mut ia, mut ib) = (0usize, 0usize);
+    let mut at = [0usize; 2];
     for out_block in y.chunks_exact_mut(block) {
+        let [ia, ib] = at;
         match (&ta, &tb) {
             (Operand::Contiguous, Operand::Contiguous) => {
                 let (ar, br) = (&xa[ia..][..block], &xb[ib..][..block]);
@@ -153,19 +146,37 @@ fn walk(a: &Tensor, b: &Tensor, op: impl Fn(f32, f32) -> f32) -> TractResult<Ten
                 }
             }
         }
-        for ax in (0..inner).rev() {
-            idx[ax] += 1;
-            ia += sa[ax];
-            ib += sb[ax];
-            if idx[ax] < shape[ax] {
-                break;
-            }
-            ia -= sa[ax] * shape[ax];
-            ib -= sb[ax] * shape[ax];
-            idx[ax] = 0;
-        }
+        advance(
+            &mut idx,
+            &shape[..inner],
+            [&sa[..inner], &sb[..inner]],
+            &mut at,
+        );
     }
     Ok(out)
+}
+
+/// One step of an odometer over `dims` (last axis fastest): `idx` moves to the next index and
+/// each `offsets[k]` by what `steps[k]` says that move costs.
+fn advance<const K: usize>(
+    idx: &mut [usize],
+    dims: &[usize],
+    steps: [&[usize]; K],
+    offsets: &mut [usize; K],
+) {
+    for ax in (0..idx.len()).rev() {
+        idx[ax] += 1;
+        for (off, st) in offsets.iter_mut().zip(steps) {
+            *off += st[ax];
+        }
+        if idx[ax] < dims[ax] {
+            return;
+        }
+        for (off, st) in offsets.iter_mut().zip(steps) {
+            *off -= st[ax] * dims[ax];
+        }
+        idx[ax] = 0;
+    }
 }
 
 /// Values of an output block (trailing axes) at least this many, where the axes allow.

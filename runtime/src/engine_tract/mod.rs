@@ -538,7 +538,6 @@ impl TractEngine {
                 let t = std::time::Instant::now();
                 let out = tract_nnef::tract_core::plan::eval(ctx, op_state, node, node_inputs);
                 let ms = t.elapsed().as_secs_f64() * 1e3;
-
                 let name = node.op().name();
                 match totals.iter_mut().find(|(n, _)| n.as_str() == name.as_ref()) {
                     Some((_, total)) => *total += ms,

@@ -458,7 +458,7 @@ mod tests {
         ]);
         for (shape, trailing) in shapes {
             let n: usize = shape.iter().product();
-            let mut x = values(n, n as u32);
+            let mut x = probe_values(n, n as u32);
             for v in x.iter_mut().step_by(7) {
                 *v = f32::NEG_INFINITY;
             }
@@ -469,17 +469,6 @@ mod tests {
                 "{shape:?} over {trailing}"
             );
         }
-    }
-
-    fn values(n: usize, seed: u32) -> Vec<f32> {
-        // A fixed pseudo-random spread over [-12, 12): a spread wide enough that the row maxima
-        // matter, no crate needed for a few hundred values.
-        (0..n as u32)
-            .map(|i| {
-                let h = (i.wrapping_mul(2_654_435_761) ^ seed).wrapping_mul(2_246_822_519);
-                (h >> 8) as f32 / (1u32 << 24) as f32 * 24.0 - 12.0
-            })
-            .collect()
     }
 
     #[test]
@@ -493,7 +482,7 @@ mod tests {
             (vec![5, 1], 1),
         ] {
             let n: usize = shape.iter().product();
-            let x = values(n, 7);
+            let x = probe_values(n, 7);
             let y = run(&shape, trailing, &x);
             let row: usize = shape[shape.len() - trailing..].iter().product();
             for (xr, yr) in x.chunks(row).zip(y.chunks(row)) {
