@@ -415,16 +415,11 @@ mod tests {
 
     use super::*;
     use crate::engine::Stage;
+    use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        bits, committed_stage, golden_tensor, inputs_of, kernel_golden, run_optimized,
+        bits, committed_rewrites, committed_stage_before, golden_tensor, inputs_of, kernel_golden,
+        run_optimized,
     };
-    use crate::engine_tract::{softmax, weighted_sum};
-
-    /// The decluttered stage of the committed bundle with the engine's other rewrites applied.
-    fn stage_model(stage: Stage) -> TypedModel {
-        let (m, _) = weighted_sum::fuse_weighted_sums(committed_stage(stage)).expect("sums");
-        softmax::fuse_softmaxes(m).expect("softmaxes").0
-    }
 
     #[test]
     fn the_kernel_is_the_python_reference_bit_for_bit() {
@@ -451,10 +446,10 @@ mod tests {
 
     #[test]
     fn fused_samplers_compute_the_unfused_graph_bit_for_bit() {
-        for (stage, samplers) in [(Stage::BevQuery, 1), (Stage::MapDecoder, 2)] {
-            let plain = stage_model(stage);
+        for stage in Stage::ALL {
+            let plain = committed_stage_before(stage, Pass::BilinearSamplers);
             let (fused, n) = fuse_bilinear_samplers(plain.clone()).expect("fuse");
-            assert_eq!(n, samplers, "{stage}");
+            assert_eq!(n, committed_rewrites(stage).bilinear_samplers, "{stage}");
             let left = fused
                 .nodes()
                 .iter()

@@ -24,6 +24,7 @@ use tract_linalg::multithread::{Executor, multithread_tract_scope};
 pub mod bilinear;
 pub mod broadcast;
 pub mod fold;
+pub mod rewrite;
 pub mod softmax;
 #[cfg(test)]
 mod test_support;
@@ -35,6 +36,8 @@ use tract_nnef::prelude::*;
 use crate::bundle::{Bundle, BundleError, DType, GraphFormat, Precision, StageEntry, TensorSpec};
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
+
+pub use rewrite::Rewrites;
 
 /// The family of f32 kernels tract 0.23.9 picks on this CPU, `<vendor>-<tier>`: vendor `intel`,
 /// `amd` or `other` (tract keeps one matmul cost model per vendor, so the same instruction set
@@ -105,16 +108,8 @@ struct StageRunner {
     state: TypedSimpleState,
     inputs: Vec<Arc<Tensor>>,
     output_lens: Vec<usize>,
-    /// `Mul -> Reduce<Sum>` pairs rewritten into the native [`weighted_sum::WeightedAxisSum`].
-    fused_sums: usize,
-    /// Bilinear samplers rewritten into the native [`bilinear::BilinearCornerSum`].
-    samplers: usize,
-    /// Softmaxes rewritten into the native [`softmax::RowSoftmax`].
-    softmaxes: usize,
-    /// Outlets of the optimised plan computed once at load ([`fold::fold_input_independent`]).
-    folded: usize,
-    /// Binary ops rewritten into the native [`broadcast::BroadcastBinary`].
-    binaries: usize,
+    /// What the load-time rewrites put into this stage's plan.
+    rewrites: Rewrites,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
 }
@@ -131,17 +126,10 @@ impl StageRunner {
             GraphFormat::Onnx => onnx_model(stage, &bytes, entry)?,
         };
         drop(bytes);
-        let (model, fused_sums) = model
+        let (model, rewrites) = model
             .into_decluttered()
-            .and_then(weighted_sum::fuse_weighted_sums)
+            .and_then(rewrite::optimise)
             .map_err(engine_err)?;
-        let (model, samplers) = bilinear::fuse_bilinear_samplers(model).map_err(engine_err)?;
-        let (model, softmaxes) = softmax::fuse_softmaxes(model).map_err(engine_err)?;
-        let (model, folded) = model
-            .into_optimized()
-            .and_then(fold::fold_input_independent)
-            .map_err(engine_err)?;
-        let (model, binaries) = broadcast::fuse_broadcast_binaries(model).map_err(engine_err)?;
         let plan = model.into_runnable().map_err(engine_err)?;
         check_graph_io(
             stage,
@@ -166,11 +154,7 @@ impl StageRunner {
             state,
             inputs,
             output_lens,
-            fused_sums,
-            samplers,
-            softmaxes,
-            folded,
-            binaries,
+            rewrites,
             last_error: None,
         })
     }
@@ -554,39 +538,13 @@ impl TractEngine {
         Ok(totals)
     }
 
-    /// How many `Mul -> Reduce<Sum>` pairs of `stage` run as the native
-    /// [`weighted_sum::WeightedAxisSum`] (the deformable samplers' corner sums).
+    /// What the load-time rewrites put into `stage`'s plan: how many of its ops run as the
+    /// engine's native kernels ([`rewrite`]); all zero for a stage that did not load.
     #[must_use]
-    pub fn fused_weighted_sums(&self, stage: Stage) -> usize {
-        self.runners.get(stage as usize).map_or(0, |r| r.fused_sums)
-    }
-
-    /// How many deformable samplers of `stage` run whole as the native
-    /// [`bilinear::BilinearCornerSum`] (their corner sums among [`Self::fused_weighted_sums`]).
-    #[must_use]
-    pub fn bilinear_samplers(&self, stage: Stage) -> usize {
-        self.runners.get(stage as usize).map_or(0, |r| r.samplers)
-    }
-
-    /// How many softmaxes of `stage` run as the native [`softmax::RowSoftmax`] (bit-identical
-    /// to tract's; 0 on a host whose softmax kernel it does not model).
-    #[must_use]
-    pub fn row_softmaxes(&self, stage: Stage) -> usize {
-        self.runners.get(stage as usize).map_or(0, |r| r.softmaxes)
-    }
-
-    /// How many outlets of `stage`'s optimised plan depend on its weights alone and were
-    /// computed once at load ([`fold::fold_input_independent`]).
-    #[must_use]
-    pub fn folded_outlets(&self, stage: Stage) -> usize {
-        self.runners.get(stage as usize).map_or(0, |r| r.folded)
-    }
-
-    /// How many `Add`, `Sub` and `Mul` of `stage` left on tract's generic path run as the native
-    /// [`broadcast::BroadcastBinary`].
-    #[must_use]
-    pub fn broadcast_binaries(&self, stage: Stage) -> usize {
-        self.runners.get(stage as usize).map_or(0, |r| r.binaries)
+    pub fn rewrites(&self, stage: Stage) -> Rewrites {
+        self.runners
+            .get(stage as usize)
+            .map_or_else(Rewrites::default, |r| r.rewrites)
     }
 
     /// Threads the stages run on (see [`TractEngine::set_threads`]).

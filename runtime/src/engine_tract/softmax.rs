@@ -359,7 +359,10 @@ mod tests {
 
     use super::*;
     use crate::engine::Stage;
-    use crate::engine_tract::test_support::{committed_stage, inputs_of, run_optimized};
+    use crate::engine_tract::rewrite::Pass;
+    use crate::engine_tract::test_support::{
+        committed_rewrites, committed_stage_before, inputs_of, run_optimized,
+    };
 
     fn order() -> SumOrder {
         SumOrder::here()
@@ -404,19 +407,10 @@ mod tests {
 
     #[test]
     fn every_stage_of_the_default_bundle_computes_its_unfused_graph_bit_for_bit() {
-        // Softmaxes per stage of `test`: bev_query's sampling and GKT weights, per decoder layer
-        // its self-attention and sampling weights, and one window attention per Swin block
-        // (`test`'s depths are 1, 2, 1, 1).
-        for (stage, want) in [
-            (Stage::ImageEncoder, 0),
-            (Stage::BevQuery, 2),
-            (Stage::SatelliteEncoder, 5),
-            (Stage::BevEncoder, 0),
-            (Stage::MapDecoder, 4),
-        ] {
-            let plain = committed_stage(stage);
+        for stage in Stage::ALL {
+            let plain = committed_stage_before(stage, Pass::RowSoftmaxes);
             let (fused, n) = fuse_softmaxes(plain.clone()).expect("fuse");
-            assert_eq!(n, want, "{stage}");
+            assert_eq!(n, committed_rewrites(stage).row_softmaxes, "{stage}");
             let left = fused
                 .nodes()
                 .iter()

@@ -6,6 +6,7 @@ use tract_nnef::internal::*;
 use crate::bundle::Bundle;
 use crate::engine::Stage;
 use crate::engine_tract::nnef_model;
+use crate::engine_tract::rewrite::{Pass, Rewrites, optimise_before};
 
 /// The repository root (the runtime crate's parent).
 pub(crate) fn root() -> std::path::PathBuf {
@@ -51,6 +52,59 @@ pub(crate) fn committed_stage(stage: Stage) -> TypedModel {
         .expect("model")
         .into_decluttered()
         .expect("declutter")
+}
+
+/// [`committed_stage`] through the engine's rewrites that run before `stop`: the graph `stop`
+/// sees at load.
+pub(crate) fn committed_stage_before(stage: Stage, stop: Pass) -> TypedModel {
+    optimise_before(committed_stage(stage), Some(stop))
+        .expect("rewrites")
+        .0
+}
+
+/// What the load-time rewrites put into each stage of the committed default bundle on this
+/// host: the one table the engine's test and each rewrite's own test check against.
+///
+/// The binary ops tract's optimiser leaves on its generic path depend on the kernel tier: the
+/// AVX-512 kernels fuse fewer of them (both vendors, measured on `intel-avx512f` and with
+/// `TRACT_X86_KIND=amd`) than the AVX2 + FMA ones (`amd-fma`). A tier without counts here
+/// (`generic`) fails the tests until they are measured and added.
+pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
+    let avx512 = crate::engine_tract::kernel_family().ends_with("-avx512f");
+    // Per stage in `Stage::ALL` order: image, bev_query, bev_encoder, satellite, decoder.
+    let broadcast = if avx512 {
+        [4, 7, 4, 40, 16]
+    } else {
+        [2, 4, 0, 31, 2]
+    };
+    let none = Rewrites {
+        broadcast_binaries: broadcast[stage as usize],
+        ..Rewrites::default()
+    };
+    match stage {
+        Stage::ImageEncoder | Stage::BevEncoder => none,
+        // One deformable self-attention sampler; softmaxes of its sampling and GKT weights.
+        Stage::BevQuery => Rewrites {
+            weighted_sums: 1,
+            bilinear_samplers: 1,
+            row_softmaxes: 2,
+            ..none
+        },
+        // One window attention per Swin block (`test`'s depths are 1, 2, 1, 1).
+        Stage::SatelliteEncoder => Rewrites {
+            row_softmaxes: 5,
+            ..none
+        },
+        // Per decoder layer (`test` has 2) one cross-attention sampler and two softmaxes; the
+        // layer-0 self-attention reads its learned queries only, so it is computed at load.
+        Stage::MapDecoder => Rewrites {
+            weighted_sums: 2,
+            bilinear_samplers: 2,
+            row_softmaxes: 4,
+            folded_outlets: 4,
+            ..none
+        },
+    }
 }
 
 /// Deterministic inputs: f32 spread over [-2, 2) (enough to drive samples past the map edges),

@@ -433,7 +433,7 @@ mod tests {
     use crate::engine::Stage;
     use crate::engine_tract::TractEngine;
     use crate::engine_tract::test_support::{
-        bits, golden_tensor as tensor, kernel_golden as golden,
+        bits, committed_rewrites, golden_tensor as tensor, kernel_golden as golden,
     };
     use tract_nnef::tract_core::ops::math::mul;
 
@@ -571,52 +571,12 @@ mod tests {
     }
 
     #[test]
-    fn the_samplers_and_softmaxes_of_the_default_bundle_run_natively() {
+    fn the_default_bundle_runs_its_native_kernels() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let engine = TractEngine::open(root.join("models/bundles/test.satmap")).unwrap();
-        assert_eq!(engine.fused_weighted_sums(Stage::BevQuery), 1);
-        // One cross-attention per decoder layer (`test` has 2).
-        assert_eq!(engine.fused_weighted_sums(Stage::MapDecoder), 2);
-        // ... and each of those whole, from the pixel coordinates on (`bilinear`).
-        assert_eq!(engine.bilinear_samplers(Stage::BevQuery), 1);
-        assert_eq!(engine.bilinear_samplers(Stage::MapDecoder), 2);
-        // Every softmax runs as the native row softmax (counts as in `softmax`'s tests).
-        for (stage, n) in [
-            (Stage::ImageEncoder, 0),
-            (Stage::BevQuery, 2),
-            (Stage::SatelliteEncoder, 5),
-            (Stage::BevEncoder, 0),
-            (Stage::MapDecoder, 4),
-        ] {
-            assert_eq!(engine.row_softmaxes(stage), n, "{stage}");
-        }
-        // The decoder's layer-0 self-attention reads its learned queries only: computed at load.
-        for (stage, n) in [
-            (Stage::ImageEncoder, 0),
-            (Stage::BevQuery, 0),
-            (Stage::SatelliteEncoder, 0),
-            (Stage::BevEncoder, 0),
-            (Stage::MapDecoder, 4),
-        ] {
-            assert_eq!(engine.folded_outlets(stage), n, "{stage}");
-        }
-        // Binary ops left on tract's generic path (counts as in `broadcast`'s tests).
-        for (stage, n) in [
-            (Stage::ImageEncoder, 2),
-            (Stage::BevQuery, 4),
-            (Stage::SatelliteEncoder, 31),
-            (Stage::BevEncoder, 0),
-            (Stage::MapDecoder, 2),
-        ] {
-            assert_eq!(engine.broadcast_binaries(stage), n, "{stage}");
-        }
-        for stage in [
-            Stage::ImageEncoder,
-            Stage::BevEncoder,
-            Stage::SatelliteEncoder,
-        ] {
-            assert_eq!(engine.fused_weighted_sums(stage), 0, "{stage}");
-            assert_eq!(engine.bilinear_samplers(stage), 0, "{stage}");
-        }
+        // The engine's load applies each rewrite as its own test does, in the same order.
+        let got: Vec<_> = Stage::ALL.map(|s| engine.rewrites(s)).to_vec();
+        let want: Vec<_> = Stage::ALL.map(committed_rewrites).to_vec();
+        assert_eq!(got, want);
     }
 }

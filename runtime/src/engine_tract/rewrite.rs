@@ -1,0 +1,79 @@
+//! The engine's load-time rewrites of one stage's graph, in the one order they run, and the
+//! record of what they did.
+//!
+//! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
+//! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
+//! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused) and the
+//! softmaxes ([`softmax`]). Then tract's optimiser. On the optimised plan last: the outlets that
+//! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
+//! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
+//! nothing). Every rewrite computes its graph's values bit for bit (each module's tests).
+
+use tract_nnef::prelude::*;
+
+use crate::engine_tract::{bilinear, broadcast, fold, softmax, weighted_sum};
+
+/// How many native ops the load-time rewrites put into one stage ([`optimise`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Rewrites {
+    /// `Mul -> Reduce<Sum>` pairs rewritten into [`weighted_sum::WeightedAxisSum`] (the
+    /// deformable samplers' corner sums).
+    pub weighted_sums: usize,
+    /// Deformable samplers run whole as [`bilinear::BilinearCornerSum`] (their corner sums
+    /// among `weighted_sums`).
+    pub bilinear_samplers: usize,
+    /// Softmaxes run as [`softmax::RowSoftmax`] (0 on a host whose softmax kernel it does not
+    /// model).
+    pub row_softmaxes: usize,
+    /// Outlets of the optimised plan that depend on the weights alone, computed at load.
+    pub folded_outlets: usize,
+    /// `Add`, `Sub` and `Mul` left on tract's generic path, run as
+    /// [`broadcast::BroadcastBinary`].
+    pub broadcast_binaries: usize,
+}
+
+/// The rewrites in the order [`optimise`] runs them (tract's optimiser between `RowSoftmaxes`
+/// and `Fold`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) enum Pass {
+    WeightedSums,
+    BilinearSamplers,
+    RowSoftmaxes,
+    Fold,
+    BroadcastBinaries,
+}
+
+/// A decluttered stage through every rewrite and tract's optimiser: the graph the engine plans.
+pub(crate) fn optimise(model: TypedModel) -> TractResult<(TypedModel, Rewrites)> {
+    optimise_before(model, None)
+}
+
+/// A decluttered stage through the rewrites that run before `stop` (all with `None`): the graph
+/// `stop` sees at load, so a test can compare that one rewrite against its input. Optimised
+/// when `stop` comes after tract's optimiser, decluttered otherwise.
+pub(crate) fn optimise_before(
+    mut model: TypedModel,
+    stop: Option<Pass>,
+) -> TractResult<(TypedModel, Rewrites)> {
+    let runs = |pass: Pass| stop.is_none_or(|s| pass < s);
+    let mut done = Rewrites::default();
+    if runs(Pass::WeightedSums) {
+        (model, done.weighted_sums) = weighted_sum::fuse_weighted_sums(model)?;
+    }
+    if runs(Pass::BilinearSamplers) {
+        (model, done.bilinear_samplers) = bilinear::fuse_bilinear_samplers(model)?;
+    }
+    if runs(Pass::RowSoftmaxes) {
+        (model, done.row_softmaxes) = softmax::fuse_softmaxes(model)?;
+    }
+    if stop.is_none_or(|s| s > Pass::RowSoftmaxes) {
+        model = model.into_optimized()?;
+    }
+    if runs(Pass::Fold) {
+        (model, done.folded_outlets) = fold::fold_input_independent(model)?;
+    }
+    if runs(Pass::BroadcastBinaries) {
+        (model, done.broadcast_binaries) = broadcast::fuse_broadcast_binaries(model)?;
+    }
+    Ok((model, done))
+}
