@@ -82,7 +82,7 @@ PAPER_FRAMES ?= 2
 SATMAP_PY_SOURCES := $(shell find models/src/satmap_ref -name '*.py')
 test-paper: $(PAPER_BUNDLE)/manifest.sha256
 	SATMAP_LAYOUT=layouts/paper.toml $(CARGO) test --workspace --exclude satmap-nostd-check \
-	  --no-run --test cli_refusals
+	  --no-run --test harness_arena
 	target/debug/satmap-sim drive --bundle $(PAPER_BUNDLE) --frames $(PAPER_FRAMES) --quiet
 
 $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
@@ -106,7 +106,7 @@ $(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # The C API from C: builds the static library, compiles examples/c/replay.c with the system C
 # compiler (warnings are errors) and replays the committed scenario over static caller-owned
 # regions, natively (digests must equal the Rust run's, examples/c/expected-<family>.txt, checked by
-# tests/c_api.rs; every CRC check and every bit flip of a frame caught), then the first two
+# tests/integration/c_api.rs; every CRC check and every bit flip of a frame caught), then the first two
 # frames again under valgrind (any memory error or leak fails; see replay.c on why digests are
 # not compared there).
 # The static library `cargo test` builds for the workspace (crate-type staticlib): the same

@@ -212,7 +212,7 @@ int main(int argc, char **argv) {
     uint64_t seq = 0;
     uint16_t counter = 0;
     int crc_ok = satmap_check_map_frame(wire, n, SATMAP_DEFAULT_DATA_ID, &seq, &counter) == SATMAP_STATUS_OK;
-    /* Every single-bit flip of the first received frame must fail the check (tests/c_api.rs
+    /* Every single-bit flip of the first received frame must fail the check (tests/integration/c_api.rs
      * flips every frame's bits; under valgrind one frame keeps the run short). */
     size_t flips_caught = 0, flips = k == 0 && !memcheck ? n * 8 : 0;
     for (size_t bit = 0; bit < flips; bit++) {

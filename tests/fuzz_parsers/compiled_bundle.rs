@@ -4,7 +4,7 @@
 //! archive see the edits). A bundle that opens must hand out stage bytes matching its manifest.
 //!
 //! The seed is the committed `test.satmap`'s manifest over tiny stand-in stage entries (opening
-//! does not parse NNEF; the engine does, and `tests/compiled_bundle.rs` covers that), so cases
+//! does not parse NNEF; the engine does, and `tests/integration/compiled_bundle.rs` covers that), so cases
 //! stay small enough for thousands of them.
 
 use satmap_runtime::bundle::archive::write_archive;

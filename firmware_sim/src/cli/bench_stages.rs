@@ -69,7 +69,7 @@ pub struct StageTimes {
 
 /// A stage's recorded inputs: `<bundle>/reference.safetensors`, or `<name>/reference.safetensors`
 /// beside a compiled `<name>.satmap`. Shared by this tool, the `stages` criterion bench and
-/// `tests/threads.rs`.
+/// `tests/integration/threads.rs`.
 #[derive(Debug, Clone)]
 pub struct ReferenceInputs {
     /// `image_encoder.image`, u8 RGB `[image_h, image_w, 3]` (camera 0).

@@ -7,7 +7,7 @@
 //! (about `d^3 / 6R^2` in position, 4 m at 100 km) cancels: a fix maps to the plane point whose
 //! pixels were filled from that very ground. What remains is the vertical drop of
 //! [`ground_point`] (a sphere of radius [`EARTH_RADIUS_M`] where the vehicle sees the
-//! ellipsoid) and the plane's local scale; `tests/route_frame_distortion.rs` measures both on
+//! ellipsoid) and the plane's local scale; `tests/integration/route_frame_distortion.rs` measures both on
 //! the ground and bounds them for routes within [`MAX_ROUTE_RADIUS_M`].
 
 use glam::{DVec2, DVec3};
@@ -23,7 +23,7 @@ pub const EARTH_RADIUS_M: f64 = 6_371_000.0;
 /// Within it (and 2.5 km beyond, for a vehicle off the route) every point of the crop lands at
 /// most 12 cm from its true ground position: measured 7.3 cm at 100 km and 9.1 cm at
 /// 107.5 km, at the equator north-south, the worst case (the drop's sphere is farthest from
-/// the ellipsoid there); `tests/route_frame_distortion.rs`. The error grows as `d^3`: 25 cm
+/// the ellipsoid there); `tests/integration/route_frame_distortion.rs`. The error grows as `d^3`: 25 cm
 /// at 150 km. 105 km leaves a 100 km route built from its first point (the default origin)
 /// 5 km of margin; with the origin at the route's middle, routes up to 210 km fit.
 pub const MAX_ROUTE_RADIUS_M: f64 = 105_000.0;

@@ -14,7 +14,7 @@
 //! threads (never rayon's global pool, whose size the process does not control) and every run
 //! executes inside it: tract's matmuls split over output tiles and its row kernels over rows,
 //! each reduction stays serial on one thread, so the outputs are bit-identical for any N
-//! (`tests/threads.rs` asserts it over a replay).
+//! (`tests/integration/threads.rs` asserts it over a replay).
 
 use std::num::NonZeroUsize;
 use std::sync::Arc;

@@ -410,7 +410,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     }
 
     // Shorthands for the most used views of [`StepBuffers`], kept so that existing callers
-    // (`tests/golden_step.rs`, the sim harness) need not change.
+    // (`tests/integration/golden_step.rs`, the sim harness) need not change.
 
     /// CAN-bus vector of the last attempted step; see [`StepBuffers::can_bus`].
     #[must_use]

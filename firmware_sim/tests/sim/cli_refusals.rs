@@ -6,12 +6,12 @@
 //! the route-pack builder now refuses such tiles, so the pack here is of another place (every
 //! crop finds no coverage). The crop-fault reasons are covered by `harness::degraded`'s tests.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use common::run;
+use crate::common::run;
 use satmap_runtime::geo::Geodetic;
 use satmap_sim::harness::world_imagery::RasterImagery;
 use satmap_sim::harness::{EXIT_BAD_INPUT, EXIT_DEGRADED};

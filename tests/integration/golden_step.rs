@@ -5,9 +5,9 @@
 //! Tolerances: stage outputs 1e-4 max abs (tract vs onnxruntime on the same ONNX graphs);
 //! CAN-bus vector 1e-6; decoded points 1e-3 m; scores 1e-5.
 
-mod common;
+use crate::common;
 
-use common::{GoldenFrame, calibration, engine, max_abs_diff};
+use crate::common::{GoldenFrame, calibration, engine, max_abs_diff};
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::satellite::{FixedCrop, NoSatellite};
 use satmap_runtime::{MapClass, MapFrame, SatMap, SatellitePrior, StepError};
@@ -223,7 +223,7 @@ fn two_hundred_steps_are_bit_identical_within_and_across_processes() {
     let child = std::process::Command::new(exe)
         .args([
             "--exact",
-            "child_process_digests",
+            "golden_step::child_process_digests",
             "--ignored",
             "--nocapture",
         ])

@@ -3,9 +3,9 @@
 //! it and reports the worst step against the `satellite_crop` budget (exit 0 within it), and
 //! bad settings are refused as bad input (exit 2) before any work.
 
-mod common;
+use crate::common;
 
-use common::run;
+use crate::common::run;
 use satmap_sim::harness::EXIT_BAD_INPUT;
 
 const BUNDLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/bundles/test");

@@ -5,9 +5,9 @@
 //! gather-sum must be bit-identical (same operations in the same order as
 //! `satmap_ref.gkt.gather_sum`).
 
-mod common;
+use crate::common;
 
-use common::{Golden, GoldenFrame, calibration};
+use crate::common::{Golden, GoldenFrame, calibration};
 use satmap_runtime::bundle::Bundle;
 use satmap_runtime::gkt::kernel::gather_sum;
 use satmap_runtime::gkt::lut::Lut;

@@ -12,7 +12,7 @@
 //!
 //! Errors are ECEF distances: position (e = 0, what shifts the crop), shape (the offset vector
 //! from the centre, i.e. scale and rotation), and total. `cargo test --test
-//! route_frame_distortion -- --nocapture` prints the maxima per distance band.
+//! integration route_frame_distortion -- --nocapture` prints the maxima per distance band.
 
 use glam::{DVec2, DVec3};
 use satmap_runtime::geo::{EnuFrame, Geodetic, geodetic_to_ecef};

@@ -3,7 +3,7 @@
 //! bundle folder, every manifest number range-checked even under a forged digest, the engine
 //! parsing only bytes it verified, and graph inputs bound by name.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

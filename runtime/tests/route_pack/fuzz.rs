@@ -1,11 +1,11 @@
 //! Property-based fuzzing of the pack parser and the crop behind it: arbitrary bytes,
 //! truncations and mutations of valid packs never panic or read out of bounds.
 
-mod route_pack_common;
+use crate::common;
 
 use glam::DVec2;
 use proptest::prelude::*;
-use route_pack_common::{draw_pack, grid};
+use crate::common::{draw_pack, grid};
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::format::HEADER_LEN;
 use satmap_runtime::route_pack::{

@@ -3,7 +3,7 @@
 //! every step digest of a replay. The pool really exists (its workers are named threads of this
 //! process). Speed is the `stages` bench's and `make bench-peers`' business, not a test's.
 
-mod common;
+use crate::common;
 
 use std::num::NonZeroUsize;
 

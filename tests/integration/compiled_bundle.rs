@@ -5,11 +5,11 @@
 //! no ONNX front end; and the f16 and int8 bundles step within measured bounds of f32, per stage
 //! and in map space over a replay.
 
-mod common;
+use crate::common;
 
 use std::sync::OnceLock;
 
-use common::{GoldenFrame, bundle_dir, calibration, max_abs_diff};
+use crate::common::{GoldenFrame, bundle_dir, calibration, max_abs_diff};
 use satmap_layout::MemoryLayout;
 use satmap_runtime::InitError;
 use satmap_runtime::SatMap;

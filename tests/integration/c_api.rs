@@ -4,12 +4,12 @@
 //! golden inputs; `SATMAP_BLESS=1` rewrites it and `expected-<kernel family>.txt`, the Rust
 //! run's digests on this CPU's family of tract kernels, that the C example compares against).
 
-mod common;
+use crate::common;
 
 use std::ffi::CString;
 use std::path::PathBuf;
 
-use common::{GoldenFrame, calibration, compiled_engine, root};
+use crate::common::{GoldenFrame, calibration, compiled_engine, root};
 use satmap_capi::{
     SATMAP_DEFAULT_DATA_ID, SATMAP_MAX_WIRE_BYTES, SATMAP_REGION_COUNT, SatmapCameraImage,
     SatmapFrame, SatmapRegion, SatmapRegionInfo, SatmapRuntime, SatmapSliceInfo, SatmapStatus,
