@@ -5,8 +5,6 @@
 //! Tolerances: stage outputs 1e-4 max abs (tract vs onnxruntime on the same ONNX graphs);
 //! CAN-bus vector 1e-6; decoded points 1e-3 m; scores 1e-5.
 
-use crate::common;
-
 use crate::common::{GoldenFrame, calibration, engine, max_abs_diff};
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::satellite::{FixedCrop, NoSatellite};

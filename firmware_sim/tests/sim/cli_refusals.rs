@@ -6,8 +6,6 @@
 //! the route-pack builder now refuses such tiles, so the pack here is of another place (every
 //! crop finds no coverage). The crop-fault reasons are covered by `harness::degraded`'s tests.
 
-use crate::common;
-
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 

@@ -3,8 +3,6 @@
 //! it and reports the worst step against the `satellite_crop` budget (exit 0 within it), and
 //! bad settings are refused as bad input (exit 2) before any work.
 
-use crate::common;
-
 use crate::common::run;
 use satmap_sim::harness::EXIT_BAD_INPUT;
 

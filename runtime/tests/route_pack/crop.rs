@@ -1,12 +1,10 @@
 //! Crop geometry against the layout of `ARCHITECTURE.md`: markers at known ego offsets for
 //! several yaws, a straight line across tile seams, sub-pixel shifts, coverage flags.
 
-use crate::common;
-
 use std::f64::consts::{FRAC_PI_2, PI};
 
-use glam::DVec2;
 use crate::common::{centred_spec, crop, draw_pack, grid, px};
+use glam::DVec2;
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::{FILL_RGB, PackSource};
 use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};

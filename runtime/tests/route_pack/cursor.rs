@@ -8,10 +8,8 @@
 //! (4096), the prefetch walk (at most 128, `ROUTE_WALK_SEGMENTS`; its 4 samples every 8 m,
 //! two tiles ahead, end in the 33rd segment, so exactly 33 where no tile lies ahead).
 
-use crate::common;
-
-use glam::DVec2;
 use crate::common::{centred_spec, crop, draw_pack, grid};
+use glam::DVec2;
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::{
     MAX_ROUTE_SEGMENTS_PER_STEP, PackSource, ROUTE_SWEEP_PER_STEP, RouteState,

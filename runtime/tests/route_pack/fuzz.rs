@@ -1,11 +1,9 @@
 //! Property-based fuzzing of the pack parser and the crop behind it: arbitrary bytes,
 //! truncations and mutations of valid packs never panic or read out of bounds.
 
-use crate::common;
-
+use crate::common::{draw_pack, grid};
 use glam::DVec2;
 use proptest::prelude::*;
-use crate::common::{draw_pack, grid};
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::format::HEADER_LEN;
 use satmap_runtime::route_pack::{

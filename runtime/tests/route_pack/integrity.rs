@@ -1,10 +1,8 @@
 //! Integrity: every single-bit flip of a small pack is caught (header or index: load error;
 //! tile: that tile reported corrupt and never sampled), and 10 000 random flips of a larger one.
 
-use crate::common;
-
-use glam::DVec2;
 use crate::common::{crop, draw_pack, grid};
+use glam::DVec2;
 use satmap_runtime::pose::EgoPose;
 use satmap_runtime::route_pack::format::{HEADER_LEN, INDEX_ENTRY_LEN, ROUTE_POINT_LEN};
 use satmap_runtime::route_pack::{FILL_RGB, PackError, PackSource, RoutePack, TileKey};
