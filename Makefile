@@ -11,7 +11,7 @@ CARGO ?= cargo
 .PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers
 
 # The demo runs the binary `make test` builds (the same cargo command, so the dependency tree is
-# compiled once for both): the test profile, opt-level 3 for every crate, ours and tract's.
+# compiled once for both): the test profile, opt-level 3 for ours and tract's engine (Cargo.toml).
 # `cargo run -p satmap-sim` would resolve features for that one package and compile tract again.
 demo:
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
