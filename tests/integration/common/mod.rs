@@ -1,8 +1,6 @@
 //! Golden-vector access shared by the integration tests: the committed `test` bundle, the
 //! calibration and the frames written by `models/` (`python -m satmap_ref.golden`).
 
-#![allow(dead_code)]
-
 use std::path::PathBuf;
 
 use glam::{DVec2, Vec3};

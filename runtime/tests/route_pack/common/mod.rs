@@ -1,6 +1,5 @@
 //! Test packs drawn in code: tiles painted per global pack pixel, encoded with the runtime's
 //! writer.
-#![allow(dead_code)]
 
 use glam::DVec2;
 use satmap_runtime::geo::Geodetic;
