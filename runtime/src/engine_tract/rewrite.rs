@@ -3,15 +3,16 @@
 //!
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
-//! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused) and the
-//! softmaxes ([`softmax`]). Then tract's optimiser. On the optimised plan last: the outlets that
+//! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
+//! softmaxes ([`softmax`]) and the wide convolutions, planned with eager im2col
+//! ([`conv_im2col`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
 //! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
 //! nothing). Every rewrite computes its graph's values bit for bit (each module's tests).
 
 use tract_nnef::prelude::*;
 
-use crate::engine_tract::{bilinear, broadcast, fold, softmax, weighted_sum};
+use crate::engine_tract::{bilinear, broadcast, conv_im2col, fold, softmax, weighted_sum};
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -25,6 +26,8 @@ pub struct Rewrites {
     /// Softmaxes run as [`softmax::RowSoftmax`] (0 on a host whose softmax kernel it does not
     /// model).
     pub row_softmaxes: usize,
+    /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]).
+    pub eager_im2col_convs: usize,
     /// Outlets of the optimised plan that depend on the weights alone, computed at load.
     pub folded_outlets: usize,
     /// `Add`, `Sub` and `Mul` left on tract's generic path, run as
@@ -32,13 +35,14 @@ pub struct Rewrites {
     pub broadcast_binaries: usize,
 }
 
-/// The rewrites in the order [`optimise`] runs them (tract's optimiser between `RowSoftmaxes`
+/// The rewrites in the order [`optimise`] runs them (tract's optimiser between `EagerIm2col`
 /// and `Fold`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub(crate) enum Pass {
     WeightedSums,
     BilinearSamplers,
     RowSoftmaxes,
+    EagerIm2col,
     Fold,
     BroadcastBinaries,
 }
@@ -66,7 +70,10 @@ pub(crate) fn optimise_before(
     if runs(Pass::RowSoftmaxes) {
         (model, done.row_softmaxes) = softmax::fuse_softmaxes(model)?;
     }
-    if stop.is_none_or(|s| s > Pass::RowSoftmaxes) {
+    if runs(Pass::EagerIm2col) {
+        (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
+    }
+    if stop.is_none_or(|s| s > Pass::EagerIm2col) {
         model = model.into_optimized()?;
     }
     if runs(Pass::Fold) {

@@ -1,0 +1,167 @@
+//! The im2col path of the wide convolutions: eager where tract would gather lazily.
+//!
+//! tract 0.23.9 runs every f32 convolution with a 3x3 (or larger) kernel that is not a direct
+//! spatial one through *lazy* im2col: the matrix product gathers its image operand panel by
+//! panel from the padded input. On the wide convolutions of `nano` and `paper` (256 output
+//! channels or more over a small feature map: ResNet's layer3/layer4, the satellite FPN) that
+//! gather costs 2-5x the product itself; *eager* im2col (the whole `[k, n]` operand packed once,
+//! then the same product) runs them 2.2-3.4x faster, and loses where the map is large
+//! (`runtime/benches/tract_conv.rs`, docs/perf.md). The paths feed one micro-kernel the same
+//! packed panels in the same k order, so the two compute the same bits (this module's tests).
+//!
+//! [`eager_wide_convs`] codegens each such convolution itself, before tract's optimiser, with
+//! tract's lazy-im2col knobs scoped to that one node: a convolution tract would run another way
+//! (direct spatial, a matmul) keeps tract's choice.
+
+use tract_nnef::internal::*;
+use tract_nnef::tract_core::ops::cnn::Conv;
+use tract_nnef::tract_core::ops::cnn::conv::Im2Col;
+use tract_nnef::tract_core::tract_data::knobs::KnobScope;
+
+/// Output channels from which a convolution's im2col is eager (the benchmark's crossover: 256
+/// wins 2.2-3.4x, 128 and 64 lose).
+pub const MIN_OUTPUT_CHANNELS: usize = 256;
+
+/// The largest eager im2col scratch (`k x n` f32) this pass asks for: above it (the map
+/// decoder's 4608 x 3200 input projection, 59 MB) lazy im2col was faster, and the scratch
+/// would be RAM on top of the stage's.
+pub const MAX_SCRATCH_BYTES: usize = 16 << 20;
+
+/// Codegen every wide f32 convolution of a decluttered `model` with eager im2col; returns the
+/// model and the number of convolutions so planned.
+///
+/// # Errors
+/// tract refusing a convolution's codegen or its patch (an inconsistent model).
+pub fn eager_wide_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
+    // Thresholds no convolution reaches: tract's `should_use_lazy` then says eager, for the
+    // one node planned inside the scope.
+    let eager = KnobScope::new([
+        ("TRACT_LAZY_IM2COL_MIN_KERNEL", "1000000000"),
+        ("TRACT_LAZY_IM2COL_MAX_EAGER_BYTES", "1000000000000"),
+    ])?;
+    let wide: Vec<String> = model
+        .nodes()
+        .iter()
+        .filter(|node| is_wide(&model, node))
+        .map(|node| node.name.clone())
+        .collect();
+    let mut done = 0;
+    for name in wide {
+        let id = model.node_id_by_name(&name)?;
+        let node = model.node(id);
+        let Some(patch) = eager.enter(|| node.op.codegen(&model, node))? else {
+            continue;
+        };
+        // Only an im2col plan is this pass's business; any other (direct spatial) is tract's
+        // own choice, left to its optimiser.
+        if !patch.model.nodes().iter().any(|n| n.op_is::<Im2Col>()) {
+            continue;
+        }
+        patch.apply(&mut model)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
+
+/// An f32 convolution of one group with at least [`MIN_OUTPUT_CHANNELS`] outputs, a kernel of
+/// more than one tap and an eager scratch within [`MAX_SCRATCH_BYTES`].
+fn is_wide(model: &TypedModel, node: &TypedNode) -> bool {
+    let Some(conv) = node.op_as::<Conv>() else {
+        return false;
+    };
+    let (Some(input), Ok(output)) = (node.inputs.first(), model.outlet_fact(node.id.into())) else {
+        return false;
+    };
+    let Ok(input) = model.outlet_fact(*input) else {
+        return false;
+    };
+    let Some(out_shape) = output.shape.as_concrete() else {
+        return false;
+    };
+    let taps: usize = conv.pool_spec.kernel_shape.iter().product();
+    let k = conv.input_channels() * taps;
+    let n = out_shape.iter().product::<usize>() / conv.output_channels().max(1);
+    conv.q_params.is_none()
+        && conv.group == 1
+        && input.datum_type == f32::datum_type()
+        && taps > 1
+        && conv.output_channels() >= MIN_OUTPUT_CHANNELS
+        && k * n * size_of::<f32>() <= MAX_SCRATCH_BYTES
+}
+
+#[cfg(test)]
+mod tests {
+    //! The pass against tract's own plan of the same convolution, bit for bit, on a wide one
+    //! (rewritten) and a narrow one (left alone).
+    use super::*;
+    use crate::engine_tract::test_support::{bits, run_optimized};
+    use tract_nnef::tract_core::ops::cnn::conv::KernelFormat;
+    use tract_nnef::tract_core::ops::cnn::{PaddingSpec, PoolSpec};
+    use tract_nnef::tract_core::ops::nn::DataFormat;
+
+    fn values(n: usize, seed: usize) -> Vec<f32> {
+        (0..n)
+            .map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 1000.0 - 0.5)
+            .collect()
+    }
+
+    /// A decluttered 3x3 same-padded convolution `ci -> co` over `h x w`, and its input.
+    fn conv_model(ci: usize, co: usize, h: usize, w: usize) -> (TypedModel, TVec<TValue>) {
+        let mut model = TypedModel::default();
+        let x = model.add_source("x", f32::fact([1, ci, h, w])).unwrap();
+        let weights = Tensor::from_shape(&[co, ci, 3, 3], &values(co * ci * 9, 1)).unwrap();
+        let kernel = model.add_const("k", weights).unwrap();
+        let bias = Tensor::from_shape(&[co], &values(co, 2)).unwrap();
+        let bias = model.add_const("b", bias).unwrap();
+        let conv = Conv {
+            pool_spec: PoolSpec {
+                data_format: DataFormat::NCHW,
+                kernel_shape: tvec!(3, 3),
+                padding: PaddingSpec::SameUpper,
+                dilations: None,
+                strides: None,
+                input_channels: ci,
+                output_channels: co,
+            },
+            kernel_fmt: KernelFormat::OIHW,
+            group: 1,
+            q_params: None,
+        };
+        let y = model.wire_node("conv", conv, &[x, kernel, bias]).unwrap();
+        model.select_output_outlets(&y).unwrap();
+        let input = Tensor::from_shape(&[1, ci, h, w], &values(ci * h * w, 3)).unwrap();
+        (model.into_decluttered().unwrap(), tvec![input.into()])
+    }
+
+    /// Whether `model` has a node of the op named `op` (tract's lazy im2col op is private).
+    fn has(model: &TypedModel, op: &str) -> bool {
+        model.nodes().iter().any(|n| n.op.name() == op)
+    }
+
+    #[test]
+    fn a_wide_convolution_runs_eager_im2col_with_tracts_bits() {
+        // ResNet-18's layer3 on `nano` (256 channels over 12 x 20).
+        let (model, inputs) = conv_model(256, 256, 12, 20);
+        let lazy = model.clone().into_optimized().unwrap();
+        assert!(has(&lazy, "LazyIm2col") && !has(&lazy, "Im2col"));
+        let (eager, n) = eager_wide_convs(model.clone()).unwrap();
+        assert_eq!(n, 1);
+        let eager = eager.into_optimized().unwrap();
+        assert!(has(&eager, "Im2col") && !has(&eager, "LazyIm2col"));
+        let want = run_optimized(model, &inputs);
+        let got = run_optimized(eager, &inputs);
+        assert_eq!(bits(&got[0]), bits(&want[0]));
+    }
+
+    #[test]
+    fn narrow_or_large_convolutions_keep_tracts_plan() {
+        // 128 output channels; then a scratch of 4608 x 3200 f32 (the map decoder's projection
+        // on `nano`, 59 MB).
+        for (ci, co, h, w) in [(128, 128, 23, 40), (512, 256, 80, 40)] {
+            let (model, _) = conv_model(ci, co, h, w);
+            let (same, n) = eager_wide_convs(model).unwrap();
+            assert_eq!(n, 0, "{ci} -> {co}");
+            assert!(has(&same, "Conv"));
+        }
+    }
+}
