@@ -15,7 +15,7 @@ use glam::{DVec2, Vec3};
 use safetensors::SafeTensors;
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine::{Engine, Stage};
-use satmap_runtime::engine_tract::{TractEngine, kernel_family};
+use satmap_runtime::engine_tract::{Rewrites, TractEngine, kernel_family};
 use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::satellite::FixedCrop;
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
@@ -63,8 +63,23 @@ pub struct StageTimes {
     pub step_ms: Vec<f64>,
     /// Why the step was not timed.
     pub step_skipped: Option<String>,
+    /// Per stage, `(rewrite, count)` of what the engine's load-time rewrites put into its plan
+    /// (`TractEngine::rewrites`).
+    pub rewrites: Vec<(&'static str, Vec<(&'static str, usize)>)>,
     /// Peak resident set of this process (`VmHWM`), KiB.
     pub max_rss_kib: u64,
+}
+
+/// A stage's [`Rewrites`] as named counts, in load order.
+fn named_counts(r: Rewrites) -> Vec<(&'static str, usize)> {
+    vec![
+        ("weighted_sums", r.weighted_sums),
+        ("bilinear_samplers", r.bilinear_samplers),
+        ("row_softmaxes", r.row_softmaxes),
+        ("eager_im2col_convs", r.eager_im2col_convs),
+        ("folded_outlets", r.folded_outlets),
+        ("broadcast_binaries", r.broadcast_binaries),
+    ]
 }
 
 /// A stage's recorded inputs: `<bundle>/reference.safetensors`, or `<name>/reference.safetensors`
@@ -214,6 +229,10 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
         }
     }
 
+    let rewrites = Stage::ALL
+        .map(|stage| (stage.name(), named_counts(engine.rewrites(stage))))
+        .to_vec();
+
     let calibration = from_toml_file(&args.calibration)?;
     let threads = engine.threads().get();
     let (step_ms, step_skipped) = match SatMap::new(engine, &calibration, FixedCrop(&r.crop)) {
@@ -236,6 +255,7 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
         ops_ms,
         step_ms,
         step_skipped,
+        rewrites,
         max_rss_kib: max_rss_kib(),
     })
 }

@@ -3,10 +3,10 @@
 //! tract 0.23.9 runs every f32 convolution with a 3x3 (or larger) kernel that is not a direct
 //! spatial one through *lazy* im2col: the matrix product gathers its image operand panel by
 //! panel from the padded input. On the wide convolutions of `nano` and `paper` (256 output
-//! channels or more over a small feature map: ResNet's layer3/layer4, the satellite FPN) that
+//! channels or more over 128 to a few thousand pixels: ResNet's layer3, the satellite FPN) that
 //! gather costs 2-5x the product itself; *eager* im2col (the whole `[k, n]` operand packed once,
-//! then the same product) runs them 2.2-3.4x faster, and loses where the map is large
-//! (`runtime/benches/tract_conv.rs`, docs/perf.md). The paths feed one micro-kernel the same
+//! then the same product) runs them 2.2-3.7x faster, and loses on narrower convolutions, on
+//! tiny maps and where the scratch is large (`runtime/benches/tract_conv.rs`, docs/perf.md). The paths feed one micro-kernel the same
 //! packed panels in the same k order, so the two compute the same bits (this module's tests).
 //!
 //! [`eager_wide_convs`] codegens each such convolution itself, before tract's optimiser, with
@@ -21,6 +21,10 @@ use tract_nnef::tract_core::tract_data::knobs::KnobScope;
 /// Output channels from which a convolution's im2col is eager (the benchmark's crossover: 256
 /// wins 2.2-3.4x, 128 and 64 lose).
 pub const MIN_OUTPUT_CHANNELS: usize = 256;
+
+/// Output pixels from which a convolution's im2col is eager: on ResNet-18's layer4 map (6 x 10)
+/// lazy im2col was 20-25% faster in three runs of the benchmark, from 12 x 20 eager 3x.
+pub const MIN_OUTPUT_PIXELS: usize = 128;
 
 /// The largest eager im2col scratch (`k x n` f32) this pass asks for: above it (the map
 /// decoder's 4608 x 3200 input projection, 59 MB) lazy im2col was faster, and the scratch
@@ -63,8 +67,9 @@ pub fn eager_wide_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize
     Ok((model, done))
 }
 
-/// An f32 convolution of one group with at least [`MIN_OUTPUT_CHANNELS`] outputs, a kernel of
-/// more than one tap and an eager scratch within [`MAX_SCRATCH_BYTES`].
+/// An f32 convolution of one group with at least [`MIN_OUTPUT_CHANNELS`] outputs over at least
+/// [`MIN_OUTPUT_PIXELS`] pixels, a kernel of more than one tap and an eager scratch within
+/// [`MAX_SCRATCH_BYTES`].
 fn is_wide(model: &TypedModel, node: &TypedNode) -> bool {
     let Some(conv) = node.op_as::<Conv>() else {
         return false;
@@ -86,6 +91,7 @@ fn is_wide(model: &TypedModel, node: &TypedNode) -> bool {
         && input.datum_type == f32::datum_type()
         && taps > 1
         && conv.output_channels() >= MIN_OUTPUT_CHANNELS
+        && n >= MIN_OUTPUT_PIXELS
         && k * n * size_of::<f32>() <= MAX_SCRATCH_BYTES
 }
 
@@ -155,9 +161,9 @@ mod tests {
 
     #[test]
     fn narrow_or_large_convolutions_keep_tracts_plan() {
-        // 128 output channels; then a scratch of 4608 x 3200 f32 (the map decoder's projection
-        // on `nano`, 59 MB).
-        for (ci, co, h, w) in [(128, 128, 23, 40), (512, 256, 80, 40)] {
+        // 128 output channels; 60 output pixels (ResNet-18's layer4 on `nano`); a scratch of
+        // 4608 x 3200 f32 (the map decoder's projection on `nano`, 59 MB).
+        for (ci, co, h, w) in [(128, 128, 23, 40), (512, 512, 6, 10), (512, 256, 80, 40)] {
             let (model, _) = conv_model(ci, co, h, w);
             let (same, n) = eager_wide_convs(model).unwrap();
             assert_eq!(n, 0, "{ci} -> {co}");
