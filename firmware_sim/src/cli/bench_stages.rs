@@ -63,23 +63,11 @@ pub struct StageTimes {
     pub step_ms: Vec<f64>,
     /// Why the step was not timed.
     pub step_skipped: Option<String>,
-    /// Per stage, `(rewrite, count)` of what the engine's load-time rewrites put into its plan
+    /// Per stage, what the engine's load-time rewrites put into its plan
     /// (`TractEngine::rewrites`).
-    pub rewrites: Vec<(&'static str, Vec<(&'static str, usize)>)>,
+    pub rewrites: Vec<(&'static str, Rewrites)>,
     /// Peak resident set of this process (`VmHWM`), KiB.
     pub max_rss_kib: u64,
-}
-
-/// A stage's [`Rewrites`] as named counts, in load order.
-fn named_counts(r: Rewrites) -> Vec<(&'static str, usize)> {
-    vec![
-        ("weighted_sums", r.weighted_sums),
-        ("bilinear_samplers", r.bilinear_samplers),
-        ("row_softmaxes", r.row_softmaxes),
-        ("eager_im2col_convs", r.eager_im2col_convs),
-        ("folded_outlets", r.folded_outlets),
-        ("broadcast_binaries", r.broadcast_binaries),
-    ]
 }
 
 /// A stage's recorded inputs: `<bundle>/reference.safetensors`, or `<name>/reference.safetensors`
@@ -230,7 +218,7 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
     }
 
     let rewrites = Stage::ALL
-        .map(|stage| (stage.name(), named_counts(engine.rewrites(stage))))
+        .map(|stage| (stage.name(), engine.rewrites(stage)))
         .to_vec();
 
     let calibration = from_toml_file(&args.calibration)?;

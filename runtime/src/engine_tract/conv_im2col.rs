@@ -5,9 +5,10 @@
 //! panel from the padded input. On the wide convolutions of `nano` and `paper` (256 output
 //! channels or more over 128 to a few thousand pixels: ResNet's layer3, the satellite FPN) that
 //! gather costs 2-5x the product itself; *eager* im2col (the whole `[k, n]` operand packed once,
-//! then the same product) runs them 2.2-3.7x faster, and loses on narrower convolutions, on
-//! tiny maps and where the scratch is large (`runtime/benches/tract_conv.rs`, docs/perf.md). The paths feed one micro-kernel the same
-//! packed panels in the same k order, so the two compute the same bits (this module's tests).
+//! then the same product) runs them 2.3-3.7x faster, and loses on narrower convolutions, on
+//! tiny maps and where the scratch is large (`runtime/benches/tract_conv.rs`, docs/perf.md).
+//! The paths feed one micro-kernel the same packed panels in the same k order, so the two
+//! compute the same bits (this module's tests).
 //!
 //! [`eager_wide_convs`] codegens each such convolution itself, before tract's optimiser, with
 //! tract's lazy-im2col knobs scoped to that one node: a convolution tract would run another way
@@ -19,7 +20,7 @@ use tract_nnef::tract_core::ops::cnn::conv::Im2Col;
 use tract_nnef::tract_core::tract_data::knobs::KnobScope;
 
 /// Output channels from which a convolution's im2col is eager (the benchmark's crossover: 256
-/// wins 2.2-3.4x, 128 and 64 lose).
+/// wins 2.3-3.7x, 128 and 64 lose).
 pub const MIN_OUTPUT_CHANNELS: usize = 256;
 
 /// Output pixels from which a convolution's im2col is eager: on ResNet-18's layer4 map (6 x 10)
@@ -98,7 +99,7 @@ fn is_wide(model: &TypedModel, node: &TypedNode) -> bool {
 #[cfg(test)]
 mod tests {
     //! The pass against tract's own plan of the same convolution, bit for bit, on a wide one
-    //! (rewritten) and a narrow one (left alone).
+    //! (rewritten); narrow, tiny-map and large-scratch ones left alone.
     use super::*;
     use crate::engine_tract::test_support::{bits, run_optimized};
     use tract_nnef::tract_core::ops::cnn::conv::KernelFormat;

@@ -14,8 +14,9 @@ use tract_nnef::prelude::*;
 
 use crate::engine_tract::{bilinear, broadcast, conv_im2col, fold, softmax, weighted_sum};
 
-/// How many native ops the load-time rewrites put into one stage ([`optimise`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
+/// field by field (`satmap-sim bench-stages` reports it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Rewrites {
     /// `Mul -> Reduce<Sum>` pairs rewritten into [`weighted_sum::WeightedAxisSum`] (the
     /// deformable samplers' corner sums).
