@@ -4,7 +4,10 @@
 //! knobs scoped to the plan, what `engine_tract::conv_im2col` does for the wide ones), as
 //! tract's matrix product alone on the same GEMM (the im2col operand given, `[m, k] x [k, n]`,
 //! m = output channels, k = 9 x input channels, n = output pixels) and as the same GEMM through
-//! matrixmultiply (ndarray's pure-Rust kernel, AVX2 + FMA, no AVX-512). FLOPs per call are
+//! matrixmultiply (ndarray's pure-Rust kernel, AVX2 + FMA, no AVX-512) and through the `gemm`
+//! crate (its AVX2 + FMA kernel on stable Rust), once as one call (k blocked by the L1 size it
+//! detects, so its summation order differs between hosts) and once in fixed k chunks of
+//! [`GEMM_K_CHUNK`] (an order that depends on the shape only). FLOPs per call are
 //! `2 m k n` (criterion's "elements"); the group names carry the shape.
 //!
 //! Run: `cargo bench --workspace --exclude satmap-nostd-check --bench tract_conv --profile test`.
@@ -31,6 +34,52 @@ const SHAPES: [(usize, usize, usize, usize); 7] = [
     (256, 256, 25, 13),
     (512, 256, 80, 40),
 ];
+
+/// k per `gemm` call in the host-independent variant: gemm 0.18.2 blocks k by at least 512
+/// (`gemm-common`'s `kernel_params`), so a call with k <= 512 runs it in one block on any host.
+const GEMM_K_CHUNK: usize = 512;
+
+/// `out = a x b` (row-major `[m, k] x [k, n]`) through the `gemm` crate on one thread, in k
+/// chunks of `k_chunk`: each chunk after the first accumulates into `out`.
+fn gemm_crate(
+    a: &[f32],
+    b: &[f32],
+    out: &mut [f32],
+    (m, k, n): (usize, usize, usize),
+    k_chunk: usize,
+) {
+    assert!(a.len() == m * k && b.len() == k * n && out.len() == m * n);
+    let mut k0 = 0;
+    while k0 < k {
+        let kc = k_chunk.min(k - k0);
+        // SAFETY: the asserted lengths bound every access: rows of `a` from column k0 to
+        // k0 + kc, rows k0..k0 + kc of `b`, all of `out`; the three do not alias.
+        unsafe {
+            gemm::gemm(
+                m,
+                n,
+                kc,
+                out.as_mut_ptr(),
+                1,
+                n as isize,
+                k0 > 0,
+                a.as_ptr().add(k0),
+                1,
+                k as isize,
+                b.as_ptr().add(k0 * n),
+                1,
+                n as isize,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                gemm::Parallelism::None,
+            );
+        }
+        k0 += kc;
+    }
+}
 
 /// Deterministic values in [-0.5, 0.5): the timing does not depend on them.
 fn values(n: usize, seed: usize) -> Vec<f32> {
@@ -114,6 +163,26 @@ fn bench(crit: &mut Criterion) {
         let mut out = Array2::<f32>::zeros((m, n));
         g.bench_function("matrixmultiply_sgemm", |b| {
             b.iter(|| general_mat_mul(1.0, black_box(&a), black_box(&bm), 0.0, &mut out))
+        });
+
+        let (a, bm) = (
+            a.into_raw_vec_and_offset().0,
+            bm.into_raw_vec_and_offset().0,
+        );
+        let mut out = vec![0f32; m * n];
+        g.bench_function("gemm_crate", |b| {
+            b.iter(|| gemm_crate(black_box(&a), black_box(&bm), &mut out, (m, k, n), k))
+        });
+        g.bench_function("gemm_crate_k512", |b| {
+            b.iter(|| {
+                gemm_crate(
+                    black_box(&a),
+                    black_box(&bm),
+                    &mut out,
+                    (m, k, n),
+                    GEMM_K_CHUNK,
+                )
+            })
         });
         g.finish();
     }
