@@ -2,13 +2,15 @@
 //!
 //! tract 0.23.9 runs every f32 convolution with a 3x3 (or larger) kernel that is not a direct
 //! spatial one through *lazy* im2col: the matrix product gathers its image operand panel by
-//! panel from the padded input. On the wide convolutions of `nano` and `paper` (256 output
-//! channels or more over 128 to a few thousand pixels: ResNet's layer3, the satellite FPN) that
-//! gather costs 2-5x the product itself; *eager* im2col (the whole `[k, n]` operand packed once,
-//! then the same product) runs them 2.3-3.7x faster, and loses on narrower convolutions, on
-//! tiny maps and where the scratch is large (`runtime/benches/tract_conv.rs`, docs/perf.md).
-//! The paths feed one micro-kernel the same packed panels in the same k order, so the two
-//! compute the same bits (this module's tests).
+//! panel from the padded input. With tract's AVX-512 kernels, on the wide convolutions of `nano`
+//! and `paper` (256 output channels or more over 128 to a few thousand pixels: ResNet's layer3,
+//! the satellite FPN), that gather cost 2-5x the product itself; *eager* im2col (the whole
+//! `[k, n]` operand packed once, then the same product) ran them 2.3-3.7x faster, and lost on
+//! narrower convolutions, on tiny maps and where the scratch is large. With the AVX2 + FMA
+//! kernels lazy im2col costs 1.1-1.3x the product and eager loses on every shape by 5-15%
+//! (`runtime/benches/tract_conv.rs`, docs/perf.md), so the pass runs on the AVX-512 tier only
+//! ([`pays_off`]). The paths feed one micro-kernel the same packed panels in the same k order,
+//! so the two compute the same bits (this module's tests): where it runs does not move a digest.
 //!
 //! [`eager_wide_convs`] codegens each such convolution itself, before tract's optimiser, with
 //! tract's lazy-im2col knobs scoped to that one node: a convolution tract would run another way
@@ -19,8 +21,8 @@ use tract_nnef::tract_core::ops::cnn::Conv;
 use tract_nnef::tract_core::ops::cnn::conv::Im2Col;
 use tract_nnef::tract_core::tract_data::knobs::KnobScope;
 
-/// Output channels from which a convolution's im2col is eager (the benchmark's crossover: 256
-/// wins 2.3-3.7x, 128 and 64 lose).
+/// Output channels from which a convolution's im2col is eager (the benchmark's crossover on
+/// AVX-512: 256 wins 2.3-3.7x, 128 and 64 lose).
 pub const MIN_OUTPUT_CHANNELS: usize = 256;
 
 /// Output pixels from which a convolution's im2col is eager: on ResNet-18's layer4 map (6 x 10)
@@ -31,6 +33,15 @@ pub const MIN_OUTPUT_PIXELS: usize = 128;
 /// decoder's 4608 x 3200 input projection, 59 MB) lazy im2col was faster, and the scratch
 /// would be RAM on top of the stage's.
 pub const MAX_SCRATCH_BYTES: usize = 16 << 20;
+
+/// Whether eager im2col runs faster than lazy on a host of kernel `family`
+/// ([`kernel_family`](crate::engine_tract::kernel_family)): on the AVX-512 tier (measured on
+/// `intel-avx512f`; `amd-avx512f` runs the same AVX-512 kernels, not measured on its own). Not
+/// on `amd-fma`, where eager lost on every benchmarked shape; not on tiers never measured.
+#[must_use]
+pub fn pays_off(family: &str) -> bool {
+    family.ends_with("-avx512f")
+}
 
 /// Codegen every wide f32 convolution of a decluttered `model` with eager im2col; returns the
 /// model and the number of convolutions so planned.
@@ -143,6 +154,12 @@ mod tests {
     /// Whether `model` has a node of the op named `op` (tract's lazy im2col op is private).
     fn has(model: &TypedModel, op: &str) -> bool {
         model.nodes().iter().any(|n| n.op.name() == op)
+    }
+
+    #[test]
+    fn eager_im2col_runs_on_the_avx512_tier_only() {
+        assert!(pays_off("intel-avx512f") && pays_off("amd-avx512f"));
+        assert!(!pays_off("amd-fma") && !pays_off("intel-fma") && !pays_off("generic"));
     }
 
     #[test]

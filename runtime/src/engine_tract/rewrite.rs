@@ -4,8 +4,8 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]) and the wide convolutions, planned with eager im2col
-//! ([`conv_im2col`]). Then tract's optimiser. On the optimised plan last: the outlets that
+//! softmaxes ([`softmax`]) and, on the AVX-512 kernel tier, the wide convolutions, planned with
+//! eager im2col ([`conv_im2col`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
 //! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
 //! nothing). Every rewrite computes its graph's values bit for bit (each module's tests).
@@ -27,7 +27,8 @@ pub struct Rewrites {
     /// Softmaxes run as [`softmax::RowSoftmax`] (0 on a host whose softmax kernel it does not
     /// model).
     pub row_softmaxes: usize,
-    /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]).
+    /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]; 0 where
+    /// it does not pay off, [`conv_im2col::pays_off`]).
     pub eager_im2col_convs: usize,
     /// Outlets of the optimised plan that depend on the weights alone, computed at load.
     pub folded_outlets: usize,
@@ -71,7 +72,7 @@ pub(crate) fn optimise_before(
     if runs(Pass::RowSoftmaxes) {
         (model, done.row_softmaxes) = softmax::fuse_softmaxes(model)?;
     }
-    if runs(Pass::EagerIm2col) {
+    if runs(Pass::EagerIm2col) && conv_im2col::pays_off(crate::engine_tract::kernel_family()) {
         (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
     }
     if stop.is_none_or(|s| s > Pass::EagerIm2col) {
