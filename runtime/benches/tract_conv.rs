@@ -1,14 +1,13 @@
 //! Minimal reproduction of the tract 0.23.9 limitations behind our convolution stages
 //! (docs/perf.md): the f32 3x3 convolutions of `nano`, each run as a tract `Conv` (tract's own
 //! choice of path: lazy im2col for all of these), as a `Conv` planned with eager im2col (tract's
-//! knobs scoped to the plan, what `engine_tract::conv_im2col` does for the wide ones), as
+//! knobs scoped to the plan, what `engine_tract::conv_im2col` does for the wide ones on the
+//! AVX-512 tier), as
 //! tract's matrix product alone on the same GEMM (the im2col operand given, `[m, k] x [k, n]`,
 //! m = output channels, k = 9 x input channels, n = output pixels) and as the same GEMM through
-//! matrixmultiply (ndarray's pure-Rust kernel, AVX2 + FMA, no AVX-512) and through the `gemm`
-//! crate (its AVX2 + FMA kernel on stable Rust), once as one call (k blocked by the L1 size it
-//! detects, so its summation order differs between hosts) and once in fixed k chunks of
-//! [`GEMM_K_CHUNK`] (an order that depends on the shape only). FLOPs per call are
-//! `2 m k n` (criterion's "elements"); the group names carry the shape.
+//! matrixmultiply (ndarray's pure-Rust kernel, AVX2 + FMA, no AVX-512). FLOPs per call are
+//! `2 m k n` (criterion's "elements"); the group names carry the shape. The `gemm` crate's
+//! columns of docs/perf.md were measured with this file at commit 7174941.
 //!
 //! Run: `cargo bench --workspace --exclude satmap-nostd-check --bench tract_conv --profile test`.
 
@@ -34,52 +33,6 @@ const SHAPES: [(usize, usize, usize, usize); 7] = [
     (256, 256, 25, 13),
     (512, 256, 80, 40),
 ];
-
-/// k per `gemm` call in the host-independent variant: gemm 0.18.2 blocks k by at least 512
-/// (`gemm-common`'s `kernel_params`), so a call with k <= 512 runs it in one block on any host.
-const GEMM_K_CHUNK: usize = 512;
-
-/// `out = a x b` (row-major `[m, k] x [k, n]`) through the `gemm` crate on one thread, in k
-/// chunks of `k_chunk`: each chunk after the first accumulates into `out`.
-fn gemm_crate(
-    a: &[f32],
-    b: &[f32],
-    out: &mut [f32],
-    (m, k, n): (usize, usize, usize),
-    k_chunk: usize,
-) {
-    assert!(a.len() == m * k && b.len() == k * n && out.len() == m * n);
-    let mut k0 = 0;
-    while k0 < k {
-        let kc = k_chunk.min(k - k0);
-        // SAFETY: the asserted lengths bound every access: rows of `a` from column k0 to
-        // k0 + kc, rows k0..k0 + kc of `b`, all of `out`; the three do not alias.
-        unsafe {
-            gemm::gemm(
-                m,
-                n,
-                kc,
-                out.as_mut_ptr(),
-                1,
-                n as isize,
-                k0 > 0,
-                a.as_ptr().add(k0),
-                1,
-                k as isize,
-                b.as_ptr().add(k0 * n),
-                1,
-                n as isize,
-                1.0,
-                1.0,
-                false,
-                false,
-                false,
-                gemm::Parallelism::None,
-            );
-        }
-        k0 += kc;
-    }
-}
 
 /// Deterministic values in [-0.5, 0.5): the timing does not depend on them.
 fn values(n: usize, seed: usize) -> Vec<f32> {
@@ -163,26 +116,6 @@ fn bench(crit: &mut Criterion) {
         let mut out = Array2::<f32>::zeros((m, n));
         g.bench_function("matrixmultiply_sgemm", |b| {
             b.iter(|| general_mat_mul(1.0, black_box(&a), black_box(&bm), 0.0, &mut out))
-        });
-
-        let (a, bm) = (
-            a.into_raw_vec_and_offset().0,
-            bm.into_raw_vec_and_offset().0,
-        );
-        let mut out = vec![0f32; m * n];
-        g.bench_function("gemm_crate", |b| {
-            b.iter(|| gemm_crate(black_box(&a), black_box(&bm), &mut out, (m, k, n), k))
-        });
-        g.bench_function("gemm_crate_k512", |b| {
-            b.iter(|| {
-                gemm_crate(
-                    black_box(&a),
-                    black_box(&bm),
-                    &mut out,
-                    (m, k, n),
-                    GEMM_K_CHUNK,
-                )
-            })
         });
         g.finish();
     }
