@@ -25,6 +25,7 @@ pub mod bilinear;
 pub mod broadcast;
 pub mod conv_im2col;
 pub mod fold;
+pub mod natural_consts;
 pub mod rewrite;
 pub mod softmax;
 #[cfg(test)]

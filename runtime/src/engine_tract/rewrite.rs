@@ -8,11 +8,13 @@
 //! eager im2col ([`conv_im2col`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
 //! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
-//! nothing). Every rewrite computes its graph's values bit for bit (each module's tests).
+//! nothing), and the constants re-laid with natural strides ([`natural_consts`]). Every rewrite computes its graph's values bit for bit (each module's tests).
 
 use tract_nnef::prelude::*;
 
-use crate::engine_tract::{bilinear, broadcast, conv_im2col, fold, softmax, weighted_sum};
+use crate::engine_tract::{
+    bilinear, broadcast, conv_im2col, fold, natural_consts, softmax, weighted_sum,
+};
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
 /// field by field (`satmap-sim bench-stages` reports it).
@@ -47,6 +49,7 @@ pub(crate) enum Pass {
     EagerIm2col,
     Fold,
     BroadcastBinaries,
+    NaturalConsts,
 }
 
 /// A decluttered stage through every rewrite and tract's optimiser: the graph the engine plans.
@@ -83,6 +86,10 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::BroadcastBinaries) {
         (model, done.broadcast_binaries) = broadcast::fuse_broadcast_binaries(model)?;
+    }
+    if runs(Pass::NaturalConsts) {
+        // A layout change, not a native op: not counted in `Rewrites`.
+        (model, _) = natural_consts::naturalise_consts(model)?;
     }
     Ok((model, done))
 }
