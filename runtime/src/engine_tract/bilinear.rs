@@ -17,12 +17,22 @@
 //! weights `gx * gy, fx * gy, gx * fy, fx * fy`; `w = (corner_weight * attn) * inside` with
 //! `inside` 1.0 when `0 <= xs <= W - 1` and `0 <= ys <= H - 1`, else 0.0; the row
 //! `((clamp(ys) * W + clamp(xs)) + head * H * W) as i64`; then the corner sum's
-//! `acc = acc + row[d] * w`, `k` ascending.
+//! `acc = acc + row[d] * w`, `k` ascending. Queries are independent, so on the engine's pool
+//! of N threads they are split between threads by fixed blocks: the same bits on any N (the
+//! engine's thread test asserts the digests on 1 and 2).
 
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::change_axes::AxisOp;
 
+use rayon::prelude::*;
+use tract_linalg::multithread::{Executor, current_tract_executor};
+
 use super::weighted_sum::WeightedAxisSum;
+
+/// Queries one task of [`BilinearCornerSum`] samples: `bev_query`'s 3,200 make 50 tasks, a
+/// decoder layer's fewer; enough to keep two to a few threads busy, few enough that a task's
+/// setup (one points buffer) does not count.
+const QUERIES_PER_TASK: usize = 64;
 
 /// `out[n, h, 0, :] = sum over k of data[row(n, h, k), :] * w(n, h, k)`, all of the module doc's
 /// sampling math done in place; inputs `(data [heads * H * W, dh], x, y, attn [N, heads, P])`.
@@ -76,50 +86,67 @@ impl EvalOp for BilinearCornerSum {
         let (w_max, h_max) = ((self.w - 1) as f32, (self.h - 1) as f32);
         let plane = (self.h * self.w) as f32;
         let mut out = vec![0.0f32; n * heads * dh];
-        // Per point: x0, x1, y0, y1, gx, fx, gy, fy, attn (reused by the four corners).
-        let mut pts = vec![[0.0f32; 9]; points];
-        for (q, acc_q) in out.chunks_exact_mut(heads * dh).enumerate() {
-            for (head, acc) in acc_q.chunks_exact_mut(dh).enumerate() {
-                let base = (q * heads + head) * points;
-                let head_off = head as f32 * plane;
-                for (p, pt) in pts.iter_mut().enumerate() {
-                    let (x, y) = (xs[base + p], ys[base + p]);
-                    let (x0, y0) = (x.floor(), y.floor());
-                    let (fx, fy) = (x - x0, y - y0);
-                    *pt = [
-                        x0,
-                        x0 + 1.0,
-                        y0,
-                        y0 + 1.0,
-                        1.0 - fx,
-                        fx,
-                        1.0 - fy,
-                        fy,
-                        attn[base + p],
-                    ];
-                }
-                for corner in 0..4 {
-                    // Corner order of the export: (x0, y0), (x1, y0), (x0, y1), (x1, y1).
-                    let (cx, cy) = (corner & 1, corner >> 1);
-                    for pt in &pts {
-                        let (xc, yc) = (pt[cx], pt[2 + cy]);
-                        let wx = if cx == 0 { pt[4] } else { pt[5] };
-                        let wy = if cy == 0 { pt[6] } else { pt[7] };
-                        let inside = xc >= 0.0 && xc <= w_max && yc >= 0.0 && yc <= h_max;
-                        let wt = ((wx * wy) * pt[8]) * if inside { 1.0 } else { 0.0 };
-                        let xi = xc.max(0.0).min(w_max);
-                        let yi = yc.max(0.0).min(h_max);
-                        let row = ((yi * wf + xi) + head_off) as i64;
-                        ensure!(
-                            (0..rows as i64).contains(&row),
-                            "sample row {row} out of range (0..{rows})"
-                        );
-                        let r = &data[row as usize * dh..][..dh];
-                        for (s, v) in acc.iter_mut().zip(r) {
-                            *s += *v * wt;
+        let query_len = heads * dh;
+        // One task: QUERIES_PER_TASK queries, each written by its own arithmetic alone, so the
+        // split (and the thread count) cannot change a bit.
+        let task = |(t, chunk): (usize, &mut [f32])| -> TractResult<()> {
+            // Per point: x0, x1, y0, y1, gx, fx, gy, fy, attn (reused by the four corners).
+            let mut pts = vec![[0.0f32; 9]; points];
+            for (i, acc_q) in chunk.chunks_exact_mut(query_len).enumerate() {
+                let q = t * QUERIES_PER_TASK + i;
+                for (head, acc) in acc_q.chunks_exact_mut(dh).enumerate() {
+                    let base = (q * heads + head) * points;
+                    let head_off = head as f32 * plane;
+                    for (p, pt) in pts.iter_mut().enumerate() {
+                        let (x, y) = (xs[base + p], ys[base + p]);
+                        let (x0, y0) = (x.floor(), y.floor());
+                        let (fx, fy) = (x - x0, y - y0);
+                        *pt = [
+                            x0,
+                            x0 + 1.0,
+                            y0,
+                            y0 + 1.0,
+                            1.0 - fx,
+                            fx,
+                            1.0 - fy,
+                            fy,
+                            attn[base + p],
+                        ];
+                    }
+                    for corner in 0..4 {
+                        // Corner order of the export: (x0, y0), (x1, y0), (x0, y1), (x1, y1).
+                        let (cx, cy) = (corner & 1, corner >> 1);
+                        for pt in &pts {
+                            let (xc, yc) = (pt[cx], pt[2 + cy]);
+                            let wx = if cx == 0 { pt[4] } else { pt[5] };
+                            let wy = if cy == 0 { pt[6] } else { pt[7] };
+                            let inside = xc >= 0.0 && xc <= w_max && yc >= 0.0 && yc <= h_max;
+                            let wt = ((wx * wy) * pt[8]) * if inside { 1.0 } else { 0.0 };
+                            let xi = xc.max(0.0).min(w_max);
+                            let yi = yc.max(0.0).min(h_max);
+                            let row = ((yi * wf + xi) + head_off) as i64;
+                            ensure!(
+                                (0..rows as i64).contains(&row),
+                                "sample row {row} out of range (0..{rows})"
+                            );
+                            let r = &data[row as usize * dh..][..dh];
+                            for (s, v) in acc.iter_mut().zip(r) {
+                                *s += *v * wt;
+                            }
                         }
                     }
                 }
+            }
+            Ok(())
+        };
+        if query_len > 0 {
+            let chunk_len = QUERIES_PER_TASK * query_len;
+            match current_tract_executor() {
+                Executor::MultiThread(pool) => {
+                    pool.install(|| out.par_chunks_mut(chunk_len).enumerate().try_for_each(task))?
+                }
+                // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
+                _ => out.chunks_mut(chunk_len).enumerate().try_for_each(task)?,
             }
         }
         Ok(tvec!(
