@@ -444,8 +444,8 @@ mod tests {
     use crate::engine::Stage;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        bits, committed_rewrites, committed_stage_before, golden_tensor, inputs_of, kernel_golden,
-        run_optimized,
+        assert_same_bits, bits, committed_rewrites, committed_stage_before, golden_tensor,
+        inputs_of, kernel_golden, run_optimized,
     };
 
     #[test]
@@ -488,10 +488,7 @@ mod tests {
             );
             let inputs = inputs_of(&plain);
             let (a, b) = (run_optimized(plain, &inputs), run_optimized(fused, &inputs));
-            assert_eq!(a.len(), b.len());
-            for (x, y) in a.iter().zip(&b) {
-                assert_eq!(bits(x), bits(y), "{stage}");
-            }
+            assert_same_bits(stage, &a, &b);
         }
     }
 }

@@ -288,7 +288,7 @@ mod tests {
     use crate::engine::Stage;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        bits, committed_rewrites, committed_stage_before, inputs_of,
+        assert_same_bits, bits, committed_rewrites, committed_stage_before, inputs_of, run_plain,
     };
     use tract_nnef::tract_core::ops::math;
 
@@ -346,16 +346,8 @@ mod tests {
             assert_eq!(n, committed_rewrites(stage).broadcast_binaries, "{stage}");
             let (_, left) = fuse_broadcast_binaries(fused.clone()).expect("again");
             assert_eq!(left, 0, "{stage}: a binary op was left on the generic path");
-            let run = |m: TypedModel| {
-                m.into_runnable()
-                    .and_then(|p| p.run(inputs.clone()))
-                    .expect("run")
-            };
-            let (a, b) = (run(plain), run(fused));
-            assert_eq!(a.len(), b.len());
-            for (x, y) in a.iter().zip(&b) {
-                assert_eq!(bits(x), bits(y), "{stage}");
-            }
+            let (a, b) = (run_plain(plain, &inputs), run_plain(fused, &inputs));
+            assert_same_bits(stage, &a, &b);
         }
     }
 }

@@ -114,7 +114,7 @@ mod tests {
     use crate::engine::Stage;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        bits, committed_rewrites, committed_stage_before, inputs_of,
+        assert_same_bits, committed_rewrites, committed_stage_before, inputs_of, run_plain,
     };
 
     #[test]
@@ -129,16 +129,8 @@ mod tests {
                 n > 0,
                 "{stage}: the folded nodes left the plan"
             );
-            let run = |m: TypedModel| {
-                m.into_runnable()
-                    .and_then(|p| p.run(inputs.clone()))
-                    .expect("run")
-            };
-            let (a, b) = (run(plain), run(folded));
-            assert_eq!(a.len(), b.len());
-            for (x, y) in a.iter().zip(&b) {
-                assert_eq!(bits(x), bits(y), "{stage}");
-            }
+            let (a, b) = (run_plain(plain, &inputs), run_plain(folded, &inputs));
+            assert_same_bits(stage, &a, &b);
         }
     }
 }

@@ -80,7 +80,9 @@ mod tests {
     use super::*;
     use crate::engine::Stage;
     use crate::engine_tract::rewrite::{Pass, optimise_before};
-    use crate::engine_tract::test_support::{bits, committed_stage_before, inputs_of};
+    use crate::engine_tract::test_support::{
+        assert_same_bits, bits, committed_stage_before, inputs_of, run_plain,
+    };
 
     #[test]
     fn an_inserted_axis_is_relaid_with_the_same_values() {
@@ -101,16 +103,8 @@ mod tests {
         let (relaid, n) = naturalise_consts(plain.clone()).expect("rewrite");
         let (_, left) = naturalise_consts(relaid.clone()).expect("again");
         assert_eq!(left, 0, "{stage}: a constant kept unnatural strides");
-        let run = |m: TypedModel| {
-            m.into_runnable()
-                .and_then(|p| p.run(inputs.clone()))
-                .expect("run")
-        };
-        let (a, b) = (run(plain), run(relaid));
-        assert_eq!(a.len(), b.len());
-        for (x, y) in a.iter().zip(&b) {
-            assert_eq!(bits(x), bits(y), "{stage}");
-        }
+        let (a, b) = (run_plain(plain, &inputs), run_plain(relaid, &inputs));
+        assert_same_bits(stage, &a, &b);
         n
     }
 

@@ -361,7 +361,7 @@ mod tests {
     use crate::engine::Stage;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        committed_rewrites, committed_stage_before, inputs_of, run_optimized,
+        assert_same_bits, committed_rewrites, committed_stage_before, inputs_of, run_optimized,
     };
 
     fn order() -> SumOrder {
@@ -419,14 +419,7 @@ mod tests {
             assert_eq!(left, 0, "{stage}: a softmax was left to tract");
             let inputs = inputs_of(&plain);
             let (a, b) = (run_optimized(plain, &inputs), run_optimized(fused, &inputs));
-            assert_eq!(a.len(), b.len());
-            for (x, y) in a.iter().zip(&b) {
-                assert_eq!(
-                    crate::engine_tract::test_support::bits(x),
-                    crate::engine_tract::test_support::bits(y),
-                    "{stage}"
-                );
-            }
+            assert_same_bits(stage, &a, &b);
         }
     }
 

@@ -135,6 +135,22 @@ pub(crate) fn inputs_of(model: &TypedModel) -> TVec<TValue> {
         .collect()
 }
 
+/// `model` as it stands (already optimised, or decluttered on purpose) run once on `inputs`.
+pub(crate) fn run_plain(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TValue> {
+    model
+        .into_runnable()
+        .and_then(|p| p.run(inputs.clone()))
+        .expect("run")
+}
+
+/// Two runs of `stage` computed the same outputs, bit for bit.
+pub(crate) fn assert_same_bits(stage: Stage, a: &[TValue], b: &[TValue]) {
+    assert_eq!(a.len(), b.len(), "{stage}: output count");
+    for (x, y) in a.iter().zip(b) {
+        assert_eq!(bits(x), bits(y), "{stage}");
+    }
+}
+
 /// `model` optimised and run once on `inputs`, as the engine plans it.
 pub(crate) fn run_optimized(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TValue> {
     model
