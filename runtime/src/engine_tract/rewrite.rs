@@ -4,16 +4,19 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]) and, on the AVX-512 kernel tier, the wide convolutions, planned with
-//! eager im2col ([`conv_im2col`]). Then tract's optimiser. On the optimised plan last: the outlets that
+//! softmaxes ([`softmax`]), on the AVX-512 kernel tier the wide convolutions, planned with
+//! eager im2col ([`conv_im2col`]), and the wide image stems, planned with im2col where tract
+//! would run them direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
 //! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
-//! nothing), and the constants re-laid with natural strides ([`natural_consts`]). Every rewrite computes its graph's values bit for bit (each module's tests).
+//! nothing), and the constants re-laid with natural strides ([`natural_consts`]). Every rewrite but
+//! [`conv_direct`] computes its graph's values bit for bit (each module's tests); that one sums
+//! the same products in another order.
 
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    bilinear, broadcast, conv_im2col, fold, natural_consts, softmax, weighted_sum,
+    bilinear, broadcast, conv_direct, conv_im2col, fold, natural_consts, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -32,6 +35,9 @@ pub struct Rewrites {
     /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]; 0 where
     /// it does not pay off, [`conv_im2col::pays_off`]).
     pub eager_im2col_convs: usize,
+    /// Convolutions tract would run direct spatial planned with im2col and its matmul instead
+    /// ([`conv_direct::im2col_wide_stems`]: the image stems of 64 channels or more).
+    pub im2col_stems: usize,
     /// Outlets of the optimised plan that depend on the weights alone, computed at load.
     pub folded_outlets: usize,
     /// `Add`, `Sub` and `Mul` left on tract's generic path, run as
@@ -39,7 +45,7 @@ pub struct Rewrites {
     pub broadcast_binaries: usize,
 }
 
-/// The rewrites in the order [`optimise`] runs them (tract's optimiser between `EagerIm2col`
+/// The rewrites in the order [`optimise`] runs them (tract's optimiser between `Im2colStems`
 /// and `Fold`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub(crate) enum Pass {
@@ -47,6 +53,7 @@ pub(crate) enum Pass {
     BilinearSamplers,
     RowSoftmaxes,
     EagerIm2col,
+    Im2colStems,
     Fold,
     BroadcastBinaries,
     NaturalConsts,
@@ -78,7 +85,10 @@ pub(crate) fn optimise_before(
     if runs(Pass::EagerIm2col) && conv_im2col::pays_off(crate::engine_tract::kernel_family()) {
         (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
     }
-    if stop.is_none_or(|s| s > Pass::EagerIm2col) {
+    if runs(Pass::Im2colStems) {
+        (model, done.im2col_stems) = conv_direct::im2col_wide_stems(model)?;
+    }
+    if stop.is_none_or(|s| s > Pass::Im2colStems) {
         model = model.into_optimized()?;
     }
     if runs(Pass::Fold) {
