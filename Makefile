@@ -92,10 +92,15 @@ $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # of test, nano and paper on each bundle's recorded inputs at 1 and 2 threads, FLOPs, the
 # machine's matmul peak, max RSS per engine; writes docs/perf.md and docs/perf.json. See
 # models/src/satmap_ref/peers.py. PEERS_FLAGS=--rounds 1 for a quick look.
+# Each bundle also runs in its compiled NNEF form (`<bundle>.satmap`, the form the runtime ships;
+# the default's is committed, nano's and paper's are compiled here, paper against its layout).
 NANO_BUNDLE := models/build/nano
 PEERS_FLAGS ?= --rounds 3 --repeats 5
 bench-peers: $(NANO_BUNDLE)/manifest.sha256 $(PAPER_BUNDLE)/manifest.sha256
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
+	target/debug/satmap-sim compile --bundle $(NANO_BUNDLE) --out $(NANO_BUNDLE).satmap
+	target/debug/satmap-sim compile --bundle $(PAPER_BUNDLE) --out $(PAPER_BUNDLE).satmap \
+	  --layout layouts/paper.toml
 	cd models && .venv/bin/python -m satmap_ref.peers --sim ../target/debug/satmap-sim \
 	  --bundle test=bundles/test --bundle nano=build/nano --bundle paper=build/paper \
 	  --threads 1 2 $(PEERS_FLAGS) --out ../docs/perf

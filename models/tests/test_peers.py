@@ -50,3 +50,24 @@ def test_max_rss_is_this_process_high_water_mark():
     status = Path("/proc/self/status").read_text()
     rss = int(next(ln for ln in status.splitlines() if ln.startswith("VmRSS:")).split()[1])
     assert kib >= rss > 0
+
+
+def test_the_compiled_form_gets_its_own_columns_where_it_was_timed():
+    result = _result()
+    run = result["bundles"]["test"]["threads"]["1"]
+    run["median_ms"][peers.COMPILED] = {s: 5.0 for s in peers._stage_names(BUNDLE)}
+    run["engines"][peers.COMPILED] = {"max_rss_kib": 1024}
+    md = peers.markdown(result, "cmd")
+    assert "| ours compiled ms | compiled x ORT |" in md
+    # 5 ms against onnxruntime's 20: 0.25; the frame 6 x 5 + 4 x 5 = 50 against 200.
+    assert "| bev_query | 1.000 | 10.00 | 20.00 | 30.00 | 0.50 | 0.33 | 5.00 | 0.25 | " in md
+    assert "| 100.0 | 200.0 | 300.0 | 0.50 | 0.33 | 50.0 | 0.25 | |" in md
+    assert "Ours on the compiled form: 1 MiB." in md
+
+
+def test_a_bundle_with_a_compiled_sibling_runs_it_too():
+    spec = peers._parse_bundle(f"test={BUNDLE}")
+    assert spec["compiled"] == BUNDLE.with_name("test.satmap")
+    assert peers._engines(spec) == peers.ENGINES + (peers.COMPILED,)
+    cmd = peers._engine_cmd(peers.COMPILED, Path("sim"), spec, 1, 3)
+    assert cmd[:4] == ["sim", "bench-stages", "--bundle", str(BUNDLE.with_name("test.satmap"))]

@@ -4,7 +4,8 @@ bench-stages`), onnxruntime and PyTorch eager, side by side, at each thread coun
 Every engine runs in a process of its own (so its peak resident set is its own), the engines
 alternate round by round (so a slow spell of this shared machine hits them all), and each
 stage's figure is the median of every timed repeat of every round. The inputs are the bundle's
-`reference.safetensors` (one recorded frame); ONNX files are the bundle's own; PyTorch runs the
+`reference.safetensors` (one recorded frame); ONNX files are the bundle's own (ours runs them
+too, and, where `<bundle>.satmap` sits beside the folder, its compiled form); PyTorch runs the
 stage modules the export traced, with the bundle's weights. FLOPs per stage come from the
 reference (`stage_table`: matmul/conv FLOPs, 2 per multiply-add); the peak is the best of a
 large f32 matmul through NumPy's BLAS and through PyTorch's at the same thread count.
@@ -40,6 +41,9 @@ def _stage_names(bundle: Path | None = None) -> tuple[str, ...]:
     return STAGE_NAMES
 
 ENGINES = ("satmap", "onnxruntime", "pytorch")
+# Our runtime on the compiled NNEF form of the same stages (`<bundle>.satmap` beside the folder,
+# what `satmap-sim compile` writes and the product ships): timed where that file exists.
+COMPILED = "satmap-compiled"
 PEAK_N = 2048
 MODELS_ROOT = Path(__file__).resolve().parents[2]
 # The weights each bundle was exported with: the committed trained default, else the seeded
@@ -175,9 +179,15 @@ def _run_json(cmd: list[str], threads: int) -> dict:
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+def _engines(spec: dict) -> tuple[str, ...]:
+    """The engines one bundle runs through: the three, and ours on its compiled form if any."""
+    return ENGINES + ((COMPILED,) if spec.get("compiled") is not None else ())
+
+
 def _engine_cmd(engine: str, sim: Path, spec: dict, threads: int, repeats: int) -> list[str]:
-    if engine == "satmap":
-        return [str(sim), "bench-stages", "--bundle", str(spec["bundle"]), "--threads",
+    if engine in ("satmap", COMPILED):
+        bundle = spec["compiled"] if engine == COMPILED else spec["bundle"]
+        return [str(sim), "bench-stages", "--bundle", str(bundle), "--threads",
                 str(threads), "--repeats", str(repeats), "--calibration",
                 str(MODELS_ROOT / "calibration" / "nuscenes_like.toml")]
     cmd = [sys.executable, "-m", "satmap_ref.peers", "worker", "--engine", engine, "--bundle",
@@ -209,11 +219,13 @@ def run(sim: Path, specs: list[dict], threads: list[int], rounds: int, repeats: 
         name = spec["name"]
         entry = {"config": spec["config"], "flops": stage_flops(spec["config"]), "threads": {}}
         for t in threads:
-            pooled = {e: {} for e in ENGINES}
-            extra = {e: {"max_rss_kib": 0} for e in ENGINES}
+            engines = _engines(spec)
+            pooled = {e: {} for e in engines}
+            extra = {e: {"max_rss_kib": 0} for e in engines}
             step = []
             for r in range(rounds):
-                order = ENGINES[r % 3:] + ENGINES[:r % 3]
+                k = r % len(engines)
+                order = engines[k:] + engines[:k]
                 for engine in order:
                     out = _run_json(_engine_cmd(engine, sim, spec, t, repeats), t)
                     for stage, ms in out["stages_ms"]:
@@ -227,7 +239,7 @@ def run(sim: Path, specs: list[dict], threads: list[int], rounds: int, repeats: 
                         step.extend(out["step_ms"])
                     log(f"{name} threads {t} round {r + 1}/{rounds}: {engine} done")
             entry["threads"][t] = {
-                "median_ms": {e: {s: _median(v) for s, v in pooled[e].items()} for e in ENGINES},
+                "median_ms": {e: {s: _median(v) for s, v in pooled[e].items()} for e in engines},
                 "samples_ms": pooled,
                 "satmap_step_median_ms": _median(step) if step else None,
                 "engines": extra,
@@ -279,7 +291,9 @@ def markdown(result: dict, command: str) -> str:
         "every engine in its own process, engines alternating. Inputs: each bundle's "
         "`reference.safetensors`. GFLOP: matmul/conv FLOPs of the reference stage. "
         "'% peak' = achieved GFLOP/s over the best large f32 matmul at that thread count. "
-        "'x ORT' = our time over onnxruntime's (below 1 is faster).",
+        "'x ORT' = our time over onnxruntime's (below 1 is faster). 'ours' reads the exported "
+        "ONNX folder, as the peers do; 'ours compiled', where the bundle has one, the compiled "
+        "NNEF form of the same stages (`<bundle>.satmap`, the form the runtime ships).",
         "",
     ]
     for t, p in result["peak"].items():
@@ -291,27 +305,37 @@ def markdown(result: dict, command: str) -> str:
         for t, r in b["threads"].items():
             peak = result["peak"][t]["gflops"]
             med = r["median_ms"]
+            # The compiled form's two columns, where it was timed (older results lack it).
+            comp = COMPILED in med
+            c_head, c_rule = (" ours compiled ms | compiled x ORT |", "---|---|") if comp else ("", "")
             lines += [f"### {name} (config `{b['config']}`), {t} thread(s)", "",
-                      "| stage | GFLOP | ours ms | ORT ms | PyTorch ms | x ORT | x PyTorch | "
+                      f"| stage | GFLOP | ours ms | ORT ms | PyTorch ms | x ORT | x PyTorch |{c_head} "
                       "% peak ours / ORT / PyTorch |",
-                      "|---|---|---|---|---|---|---|---|"]
+                      f"|---|---|---|---|---|---|---|{c_rule}---|"]
             for s in _stage_names():
                 gf = b["flops"][s] / 1e9
                 o, x, y = med["satmap"][s], med["onnxruntime"][s], med["pytorch"][s]
                 pct = " / ".join(f"{100 * gf / (v / 1e3) / peak:.0f}%" for v in (o, x, y))
+                c = f" {med[COMPILED][s]:.2f} | {med[COMPILED][s] / x:.2f} |" if comp else ""
                 lines.append(f"| {s} | {gf:.3f} | {o:.2f} | {x:.2f} | {y:.2f} | {o / x:.2f} | "
-                             f"{o / y:.2f} | {pct} |")
+                             f"{o / y:.2f} |{c} {pct} |")
             sums = [_step_sum(med[e]) for e in ENGINES]
             step = r["satmap_step_median_ms"]
             step_txt = f"{step:.1f}" if step is not None else "n/a"
+            c_sum = _step_sum(med[COMPILED]) if comp else 0.0
+            c = f" {c_sum:.1f} | {c_sum / sums[1]:.2f} |" if comp else ""
+            c_empty = " | |" if comp else ""
             lines.append(f"| frame: 6 x image_encoder + the rest | | {sums[0]:.1f} | "
                          f"{sums[1]:.1f} | {sums[2]:.1f} | {sums[0] / sums[1]:.2f} | "
-                         f"{sums[0] / sums[2]:.2f} | |")
+                         f"{sums[0] / sums[2]:.2f} |{c} |")
             skipped = r["engines"]["satmap"].get("step_skipped")
             lines.append(f"| our whole step (`SatMap::step`, gather and decode included) | | "
-                         f"{step_txt} | | | | | |")
+                         f"{step_txt} | | | | |{c_empty} |")
             rss = " / ".join(f"{r['engines'][e]['max_rss_kib'] / 1024:.0f}" for e in ENGINES)
             lines += ["", f"Max RSS per process, MiB (ours / ORT / PyTorch): {rss}."]
+            if comp:
+                lines[-1] += (f" Ours on the compiled form: "
+                              f"{r['engines'][COMPILED]['max_rss_kib'] / 1024:.0f} MiB.")
             if skipped:
                 lines.append(f"Whole step not timed: {skipped}.")
             lines.append("")
@@ -324,7 +348,9 @@ def _parse_bundle(spec: str) -> dict:
     bundle_path = Path(bundle).resolve()
     config = _config_of(bundle_path)
     w = Path(weights).resolve() if weights else DEFAULT_WEIGHTS.get(config)
-    return {"name": name, "bundle": bundle_path, "config": config, "weights": w}
+    compiled = bundle_path.with_name(bundle_path.name + ".satmap")
+    return {"name": name, "bundle": bundle_path, "config": config, "weights": w,
+            "compiled": compiled if compiled.is_file() else None}
 
 
 def main(argv: list[str] | None = None) -> None:
