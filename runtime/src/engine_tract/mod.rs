@@ -25,6 +25,7 @@ pub mod bilinear;
 pub mod broadcast;
 pub mod conv_direct;
 pub mod conv_im2col;
+pub mod conv_unfold;
 pub mod fold;
 pub mod natural_consts;
 pub mod rewrite;

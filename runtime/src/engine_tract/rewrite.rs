@@ -5,7 +5,8 @@
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
 //! softmaxes ([`softmax`]), on the AVX-512 kernel tier the wide convolutions, planned with
-//! eager im2col ([`conv_im2col`]), and the wide image stems, planned with im2col where tract
+//! eager im2col ([`conv_im2col`]), and the mid-width ones, unfolded natively for tract's matmul
+//! ([`conv_unfold`]), and the wide image stems, planned with im2col where tract
 //! would run them direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
 //! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
@@ -16,7 +17,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    bilinear, broadcast, conv_direct, conv_im2col, fold, natural_consts, softmax, weighted_sum,
+    bilinear, broadcast, conv_direct, conv_im2col, conv_unfold, fold, natural_consts, softmax,
+    weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -35,6 +37,9 @@ pub struct Rewrites {
     /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]; 0 where
     /// it does not pay off, [`conv_im2col::pays_off`]).
     pub eager_im2col_convs: usize,
+    /// Convolutions of 64 to 255 outputs run as [`conv_unfold::Unfold`] and tract's matmul
+    /// ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only, as eager im2col).
+    pub unfolded_convs: usize,
     /// Convolutions tract would run direct spatial planned with im2col and its matmul instead
     /// ([`conv_direct::im2col_wide_stems`]: the image stems of 64 channels or more).
     pub im2col_stems: usize,
@@ -53,6 +58,7 @@ pub(crate) enum Pass {
     BilinearSamplers,
     RowSoftmaxes,
     EagerIm2col,
+    UnfoldConvs,
     Im2colStems,
     Fold,
     BroadcastBinaries,
@@ -84,6 +90,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::EagerIm2col) && conv_im2col::pays_off(crate::engine_tract::kernel_family()) {
         (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
+    }
+    if runs(Pass::UnfoldConvs) && conv_im2col::pays_off(crate::engine_tract::kernel_family()) {
+        (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
     }
     if runs(Pass::Im2colStems) {
         (model, done.im2col_stems) = conv_direct::im2col_wide_stems(model)?;

@@ -82,7 +82,12 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
         ..Rewrites::default()
     };
     match stage {
-        Stage::ImageEncoder | Stage::BevEncoder => none,
+        // The tiny ResNet's two 64-channel 3x3 convolutions, unfolded on the AVX-512 tier.
+        Stage::ImageEncoder => Rewrites {
+            unfolded_convs: if avx512 { 2 } else { 0 },
+            ..none
+        },
+        Stage::BevEncoder => none,
         // One deformable self-attention sampler; softmaxes of its sampling and GKT weights.
         Stage::BevQuery => Rewrites {
             weighted_sums: 1,
