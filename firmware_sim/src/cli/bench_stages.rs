@@ -56,7 +56,8 @@ pub struct StageTimes {
     pub kernel_family: &'static str,
     /// `(stage, wall time of each repeat in ms)`, in pipeline order.
     pub stages_ms: Vec<(&'static str, Vec<f64>)>,
-    /// With `--ops`: per stage, `(operator kind, ms)` of one node-by-node run, largest first.
+    /// With `--ops`: per stage, `(operator kind, ms)` of one node-by-node run, largest first
+    /// (matrix products keyed by shape and kernel: `TractEngine::profile_ops`).
     pub ops_ms: Vec<(&'static str, Vec<(String, f64)>)>,
     /// Wall time of each whole step (six cameras), ms; empty with `step_skipped` when the
     /// built-in memory layout cannot hold the model.

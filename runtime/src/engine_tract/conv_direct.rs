@@ -11,6 +11,10 @@
 //! 2.5-3.7), an m the matmul tiles mostly waste: the pass takes convolutions of
 //! [`MIN_OUTPUT_CHANNELS`] or more.
 //!
+//! On the AVX-512 tier [`conv_unfold`](super::conv_unfold) runs first and takes the stems whose
+//! unfolded operand fits its scratch (`nano`'s); this pass takes the rest (`paper`'s) and every
+//! stem on the other tiers.
+//!
 //! [`im2col_wide_stems`] codegens each such convolution itself, before tract's optimiser, with
 //! tract's `TRACT_DISABLE_DIRECT_SPATIAL` scoped to that one node; tract then picks its im2col
 //! plan as it would for any other convolution. Unlike the other rewrites this one changes the

@@ -507,8 +507,10 @@ impl TractEngine {
     }
 
     /// Run `stage` once more on the inputs of its last run, timing every node of its plan:
-    /// wall milliseconds summed per operator kind (tract's op name), largest first. A
-    /// measurement tool (`satmap-sim bench-stages --ops`), not a step path: it allocates.
+    /// wall milliseconds summed per operator kind (tract's op name; a matrix product also by
+    /// its shape and kernel, `OptMatMul m:64 k:576 n:3840 avx512_mmm_f32_16x12`, where tract
+    /// reports them), largest first. A measurement tool (`satmap-sim bench-stages --ops`), not a
+    /// step path: it allocates.
     ///
     /// # Errors
     /// The run failing, as [`Engine`]'s stage calls report it.
@@ -526,10 +528,10 @@ impl TractEngine {
                 let t = std::time::Instant::now();
                 let out = tract_nnef::tract_core::plan::eval(ctx, op_state, node, node_inputs);
                 let ms = t.elapsed().as_secs_f64() * 1e3;
-                let name = node.op().name();
-                match totals.iter_mut().find(|(n, _)| n.as_str() == name.as_ref()) {
+                let name = op_key(node.op());
+                match totals.iter_mut().find(|(n, _)| *n == name) {
                     Some((_, total)) => *total += ms,
-                    None => totals.push((name.into_owned(), ms)),
+                    None => totals.push((name, ms)),
                 }
                 out
             })
@@ -638,5 +640,52 @@ impl Engine for TractEngine {
         r.write_input(0, camera_bev)?;
         r.write_input(1, satellite_bev)?;
         r.run(executor, &mut [class_logits_out, points_out])
+    }
+}
+
+/// The key [`TractEngine::profile_ops`] sums a node's time under: tract's op name, and for a
+/// matrix product its `m`, `k`, `n` and kernel from tract's own description of the op
+/// (`Mult: m:64 k:576 n:3840 with [avx512_mmm_f32_16x12]`), so that one shape's cost shows.
+fn op_key(op: &dyn Op) -> String {
+    let name = op.name();
+    if name != "OptMatMul" {
+        return name.into_owned();
+    }
+    let info = op.info().unwrap_or_default();
+    match info.iter().find_map(|l| l.strip_prefix("Mult: ")) {
+        Some(mult) => format!("{name} {}", mult.replace(" with [", " ").replace(']', "")),
+        None => name.into_owned(),
+    }
+}
+
+#[cfg(test)]
+mod op_key_tests {
+    //! The profile's key: a matrix product by its shape and kernel, anything else by name.
+    use super::*;
+    use tract_nnef::tract_core::ops::einsum::EinSum;
+
+    #[test]
+    fn a_matmul_is_keyed_by_its_shape_and_kernel_other_ops_by_name() {
+        let mut model = TypedModel::default();
+        let a = model.add_source("a", f32::fact([64, 32])).unwrap();
+        let b = model
+            .add_const("b", Tensor::zero::<f32>(&[32, 48]).unwrap())
+            .unwrap();
+        let op = EinSum {
+            axes: "mk,kn->mn".parse().unwrap(),
+            operating_dt: f32::datum_type(),
+            q_params: None,
+        };
+        let c = model.wire_node("mm", op, &[a, b]).unwrap();
+        model.select_output_outlets(&c).unwrap();
+        let model = model.into_optimized().unwrap();
+        let keys: Vec<String> = model.nodes().iter().map(|n| op_key(n.op())).collect();
+        let mm = keys
+            .iter()
+            .find(|k| k.starts_with("OptMatMul "))
+            .expect("an OptMatMul");
+        assert!(mm.starts_with("OptMatMul m:64 k:32 n:48 "), "{mm}");
+        assert!(!mm.contains('[') && !mm.contains("with"), "{mm}");
+        assert!(keys.iter().any(|k| k == "Source"), "{keys:?}");
     }
 }
