@@ -76,8 +76,8 @@ pub fn im2col_wide_stems(mut model: TypedModel) -> TractResult<(TypedModel, usiz
     Ok((model, done))
 }
 
-/// Whether `model` has a node of the op named `op`.
-fn has_op(model: &TypedModel, op: &str) -> bool {
+/// Whether `model` has a node of the op named `op` (tract's conv ops are private types).
+pub(crate) fn has_op(model: &TypedModel, op: &str) -> bool {
     model.nodes().iter().any(|n| n.op.name() == op)
 }
 
@@ -86,45 +86,14 @@ mod tests {
     //! The pass on ResNet stems of `nano` (rewritten, values within rounding of tract's direct
     //! kernel) and `test` (left alone).
     use super::*;
-    use crate::engine_tract::test_support::{bits, run_optimized, run_plain};
-    use tract_nnef::tract_core::ops::cnn::conv::KernelFormat;
-    use tract_nnef::tract_core::ops::cnn::{PaddingSpec, PoolSpec};
-    use tract_nnef::tract_core::ops::nn::DataFormat;
+    use crate::engine_tract::test_support::{
+        ConvShape, bits, conv_model, run_optimized, run_plain,
+    };
 
-    fn values(n: usize, seed: usize) -> Vec<f32> {
-        (0..n)
-            .map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 1000.0 - 0.5)
-            .collect()
-    }
-
-    /// A decluttered ResNet stem (7x7, stride 2, padding 3) `3 -> co` over `3 x 192 x 320` (the
-    /// image encoders' input), and its input.
+    /// A ResNet stem (7x7, stride 2, padding 3) `3 -> co` over `3 x 192 x 320` (the image
+    /// encoders' input), decluttered, and its input.
     fn stem_model(co: usize) -> (TypedModel, TVec<TValue>) {
-        let (ci, h, w) = (3, 192, 320);
-        let mut model = TypedModel::default();
-        let x = model.add_source("x", f32::fact([1, ci, h, w])).unwrap();
-        let weights = Tensor::from_shape(&[co, ci, 7, 7], &values(co * ci * 49, 1)).unwrap();
-        let kernel = model.add_const("k", weights).unwrap();
-        let bias = Tensor::from_shape(&[co], &values(co, 2)).unwrap();
-        let bias = model.add_const("b", bias).unwrap();
-        let conv = Conv {
-            pool_spec: PoolSpec {
-                data_format: DataFormat::NCHW,
-                kernel_shape: tvec!(7, 7),
-                padding: PaddingSpec::Explicit(tvec!(3, 3), tvec!(3, 3)),
-                dilations: None,
-                strides: Some(tvec!(2, 2)),
-                input_channels: ci,
-                output_channels: co,
-            },
-            kernel_fmt: KernelFormat::OIHW,
-            group: 1,
-            q_params: None,
-        };
-        let y = model.wire_node("conv", conv, &[x, kernel, bias]).unwrap();
-        model.select_output_outlets(&y).unwrap();
-        let input = Tensor::from_shape(&[1, ci, h, w], &values(ci * h * w, 3)).unwrap();
-        (model.into_decluttered().unwrap(), tvec![input.into()])
+        conv_model(&ConvShape::new(3, co, [192, 320], 7, 2, 3))
     }
 
     #[test]

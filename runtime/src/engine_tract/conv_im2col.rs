@@ -112,48 +112,12 @@ mod tests {
     //! The pass against tract's own plan of the same convolution, bit for bit, on a wide one
     //! (rewritten); narrow, tiny-map and large-scratch ones left alone.
     use super::*;
-    use crate::engine_tract::test_support::{bits, run_optimized};
-    use tract_nnef::tract_core::ops::cnn::conv::KernelFormat;
-    use tract_nnef::tract_core::ops::cnn::{PaddingSpec, PoolSpec};
-    use tract_nnef::tract_core::ops::nn::DataFormat;
-
-    fn values(n: usize, seed: usize) -> Vec<f32> {
-        (0..n)
-            .map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 1000.0 - 0.5)
-            .collect()
-    }
+    use crate::engine_tract::conv_direct::has_op;
+    use crate::engine_tract::test_support::{ConvShape, bits, conv_model, run_optimized};
 
     /// A decluttered 3x3 same-padded convolution `ci -> co` over `h x w`, and its input.
-    fn conv_model(ci: usize, co: usize, h: usize, w: usize) -> (TypedModel, TVec<TValue>) {
-        let mut model = TypedModel::default();
-        let x = model.add_source("x", f32::fact([1, ci, h, w])).unwrap();
-        let weights = Tensor::from_shape(&[co, ci, 3, 3], &values(co * ci * 9, 1)).unwrap();
-        let kernel = model.add_const("k", weights).unwrap();
-        let bias = Tensor::from_shape(&[co], &values(co, 2)).unwrap();
-        let bias = model.add_const("b", bias).unwrap();
-        let conv = Conv {
-            pool_spec: PoolSpec {
-                data_format: DataFormat::NCHW,
-                kernel_shape: tvec!(3, 3),
-                padding: PaddingSpec::SameUpper,
-                dilations: None,
-                strides: None,
-                input_channels: ci,
-                output_channels: co,
-            },
-            kernel_fmt: KernelFormat::OIHW,
-            group: 1,
-            q_params: None,
-        };
-        let y = model.wire_node("conv", conv, &[x, kernel, bias]).unwrap();
-        model.select_output_outlets(&y).unwrap();
-        let input = Tensor::from_shape(&[1, ci, h, w], &values(ci * h * w, 3)).unwrap();
-        (model.into_decluttered().unwrap(), tvec![input.into()])
-    }
-
-    /// Whether `model` has a node of the op named `op` (tract's lazy im2col op is private).
-    fn has(model: &TypedModel, op: &str) -> bool {
-        model.nodes().iter().any(|n| n.op.name() == op)
+    fn conv3x3(ci: usize, co: usize, h: usize, w: usize) -> (TypedModel, TVec<TValue>) {
+        conv_model(&ConvShape::new(ci, co, [h, w], 3, 1, 1))
     }
 
     #[test]
@@ -165,13 +129,13 @@ mod tests {
     #[test]
     fn a_wide_convolution_runs_eager_im2col_with_tracts_bits() {
         // ResNet-18's layer3 on `nano` (256 channels over 12 x 20).
-        let (model, inputs) = conv_model(256, 256, 12, 20);
+        let (model, inputs) = conv3x3(256, 256, 12, 20);
         let lazy = model.clone().into_optimized().unwrap();
-        assert!(has(&lazy, "LazyIm2col") && !has(&lazy, "Im2col"));
+        assert!(has_op(&lazy, "LazyIm2col") && !has_op(&lazy, "Im2col"));
         let (eager, n) = eager_wide_convs(model.clone()).unwrap();
         assert_eq!(n, 1);
         let eager = eager.into_optimized().unwrap();
-        assert!(has(&eager, "Im2col") && !has(&eager, "LazyIm2col"));
+        assert!(has_op(&eager, "Im2col") && !has_op(&eager, "LazyIm2col"));
         let want = run_optimized(model, &inputs);
         let got = run_optimized(eager, &inputs);
         assert_eq!(bits(&got[0]), bits(&want[0]));
@@ -182,10 +146,10 @@ mod tests {
         // 128 output channels; 60 output pixels (ResNet-18's layer4 on `nano`); a scratch of
         // 4608 x 3200 f32 (the map decoder's projection on `nano`, 59 MB).
         for (ci, co, h, w) in [(128, 128, 23, 40), (512, 512, 6, 10), (512, 256, 80, 40)] {
-            let (model, _) = conv_model(ci, co, h, w);
+            let (model, _) = conv3x3(ci, co, h, w);
             let (same, n) = eager_wide_convs(model).unwrap();
             assert_eq!(n, 0, "{ci} -> {co}");
-            assert!(has(&same, "Conv"));
+            assert!(has_op(&same, "Conv"));
         }
     }
 }

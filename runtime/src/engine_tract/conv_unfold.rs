@@ -247,85 +247,23 @@ mod tests {
     use crate::engine::Stage;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        assert_same_bits, bits, committed_stage_before, inputs_of, run_optimized,
+        ConvShape, assert_same_bits, bits, committed_stage_before, conv_model, inputs_of,
+        run_optimized,
     };
-    use tract_nnef::tract_core::ops::cnn::conv::KernelFormat;
-    use tract_nnef::tract_core::ops::cnn::{PaddingSpec, PoolSpec};
-
-    fn values(n: usize, seed: usize) -> Vec<f32> {
-        (0..n)
-            .map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 1000.0 - 0.5)
-            .collect()
-    }
-
-    /// A convolution's shape: channels in and out, input map, kernel, stride, padding each
-    /// side, dilation.
-    struct Shape {
-        ci: usize,
-        co: usize,
-        hw: [usize; 2],
-        k: usize,
-        stride: usize,
-        pad: usize,
-        dilation: usize,
-    }
-
-    /// A decluttered convolution of `s`, and its input.
-    fn conv_model(s: &Shape) -> (TypedModel, TVec<TValue>) {
-        let [h, w] = s.hw;
-        let mut model = TypedModel::default();
-        let x = model.add_source("x", f32::fact([1, s.ci, h, w])).unwrap();
-        let weights =
-            Tensor::from_shape(&[s.co, s.ci, s.k, s.k], &values(s.co * s.ci * s.k * s.k, 1))
-                .unwrap();
-        let kernel = model.add_const("k", weights).unwrap();
-        let bias = Tensor::from_shape(&[s.co], &values(s.co, 2)).unwrap();
-        let bias = model.add_const("b", bias).unwrap();
-        let conv = Conv {
-            pool_spec: PoolSpec {
-                data_format: DataFormat::NCHW,
-                kernel_shape: tvec!(s.k, s.k),
-                padding: PaddingSpec::Explicit(tvec!(s.pad, s.pad), tvec!(s.pad, s.pad)),
-                dilations: Some(tvec!(s.dilation, s.dilation)),
-                strides: Some(tvec!(s.stride, s.stride)),
-                input_channels: s.ci,
-                output_channels: s.co,
-            },
-            kernel_fmt: KernelFormat::OIHW,
-            group: 1,
-            q_params: None,
-        };
-        let y = model.wire_node("conv", conv, &[x, kernel, bias]).unwrap();
-        model.select_output_outlets(&y).unwrap();
-        let input = Tensor::from_shape(&[1, s.ci, h, w], &values(s.ci * h * w, 3)).unwrap();
-        (model.into_decluttered().unwrap(), tvec![input.into()])
-    }
-
-    fn shape(ci: usize, co: usize, hw: [usize; 2], k: usize, stride: usize, pad: usize) -> Shape {
-        Shape {
-            ci,
-            co,
-            hw,
-            k,
-            stride,
-            pad,
-            dilation: 1,
-        }
-    }
 
     #[test]
     fn resnet_shapes_run_unfolded_with_tracts_bits() {
         let cases = [
             // `nano`'s layer1 (64 -> 64 over 48 x 80), a layer2 entry (stride 2), the stem
             // (7x7, stride 2, padding 3), a dilated one, and odd maps that leave border pixels.
-            shape(64, 64, [48, 80], 3, 1, 1),
-            shape(64, 128, [48, 80], 3, 2, 1),
-            shape(3, 64, [96, 160], 7, 2, 3),
-            Shape {
+            ConvShape::new(64, 64, [48, 80], 3, 1, 1),
+            ConvShape::new(64, 128, [48, 80], 3, 2, 1),
+            ConvShape::new(3, 64, [96, 160], 7, 2, 3),
+            ConvShape {
                 dilation: 2,
-                ..shape(32, 64, [13, 17], 3, 1, 2)
+                ..ConvShape::new(32, 64, [13, 17], 3, 1, 2)
             },
-            shape(16, 96, [11, 9], 3, 2, 0),
+            ConvShape::new(16, 96, [11, 9], 3, 2, 0),
         ];
         for s in cases {
             let (model, inputs) = conv_model(&s);
@@ -343,8 +281,8 @@ mod tests {
     fn narrow_and_wide_convolutions_keep_tracts_plan() {
         // 32 outputs (below the product's useful m); 256 (conv_im2col's).
         for s in [
-            shape(64, 32, [24, 40], 3, 1, 1),
-            shape(128, 256, [12, 20], 3, 1, 1),
+            ConvShape::new(64, 32, [24, 40], 3, 1, 1),
+            ConvShape::new(128, 256, [12, 20], 3, 1, 1),
         ] {
             let (model, _) = conv_model(&s);
             let (same, n) = unfold_convs(model).unwrap();
@@ -352,7 +290,7 @@ mod tests {
             assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
         }
         // A 1x1 convolution (one tap) is a matmul already.
-        let (model, _) = conv_model(&shape(64, 64, [24, 40], 1, 1, 0));
+        let (model, _) = conv_model(&ConvShape::new(64, 64, [24, 40], 1, 1, 0));
         assert_eq!(unfold_convs(model).unwrap().1, 0);
     }
 

@@ -1,5 +1,6 @@
 //! What the native-kernel tests of `engine_tract` share: the committed files they read, the
-//! committed bundle's stages as tract models, deterministic inputs, and bitwise views.
+//! committed bundle's stages as tract models, deterministic inputs, a single-convolution
+//! model, and bitwise views.
 
 use tract_nnef::internal::*;
 
@@ -163,4 +164,81 @@ pub(crate) fn run_optimized(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TV
         .and_then(|m| m.into_runnable())
         .and_then(|p| p.run(inputs.clone()))
         .expect("run")
+}
+
+/// One 2-D convolution for the convolution passes' tests: channels in and out, input map,
+/// square kernel, stride, padding each side, dilation.
+pub(crate) struct ConvShape {
+    pub ci: usize,
+    pub co: usize,
+    pub hw: [usize; 2],
+    pub k: usize,
+    pub stride: usize,
+    pub pad: usize,
+    pub dilation: usize,
+}
+
+impl ConvShape {
+    /// Undilated.
+    pub(crate) fn new(
+        ci: usize,
+        co: usize,
+        hw: [usize; 2],
+        k: usize,
+        stride: usize,
+        pad: usize,
+    ) -> Self {
+        Self {
+            ci,
+            co,
+            hw,
+            k,
+            stride,
+            pad,
+            dilation: 1,
+        }
+    }
+}
+
+/// Deterministic f32 values in [-0.5, 0.5), `seed` picking the sequence.
+fn conv_values(n: usize, seed: usize) -> Vec<f32> {
+    (0..n)
+        .map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 1000.0 - 0.5)
+        .collect()
+}
+
+/// A decluttered f32 NCHW convolution of shape `s` (OIHW weights, a bias), and its input.
+pub(crate) fn conv_model(s: &ConvShape) -> (TypedModel, TVec<TValue>) {
+    use tract_nnef::tract_core::ops::cnn::conv::KernelFormat;
+    use tract_nnef::tract_core::ops::cnn::{Conv, PaddingSpec, PoolSpec};
+    use tract_nnef::tract_core::ops::nn::DataFormat;
+    let [h, w] = s.hw;
+    let mut model = TypedModel::default();
+    let x = model.add_source("x", f32::fact([1, s.ci, h, w])).unwrap();
+    let weights = Tensor::from_shape(
+        &[s.co, s.ci, s.k, s.k],
+        &conv_values(s.co * s.ci * s.k * s.k, 1),
+    )
+    .unwrap();
+    let kernel = model.add_const("k", weights).unwrap();
+    let bias = Tensor::from_shape(&[s.co], &conv_values(s.co, 2)).unwrap();
+    let bias = model.add_const("b", bias).unwrap();
+    let conv = Conv {
+        pool_spec: PoolSpec {
+            data_format: DataFormat::NCHW,
+            kernel_shape: tvec!(s.k, s.k),
+            padding: PaddingSpec::Explicit(tvec!(s.pad, s.pad), tvec!(s.pad, s.pad)),
+            dilations: Some(tvec!(s.dilation, s.dilation)),
+            strides: Some(tvec!(s.stride, s.stride)),
+            input_channels: s.ci,
+            output_channels: s.co,
+        },
+        kernel_fmt: KernelFormat::OIHW,
+        group: 1,
+        q_params: None,
+    };
+    let y = model.wire_node("conv", conv, &[x, kernel, bias]).unwrap();
+    model.select_output_outlets(&y).unwrap();
+    let input = Tensor::from_shape(&[1, s.ci, h, w], &conv_values(s.ci * h * w, 3)).unwrap();
+    (model.into_decluttered().unwrap(), tvec![input.into()])
 }
