@@ -113,6 +113,10 @@ fn walk(a: &Tensor, b: &Tensor, op: impl Fn(f32, f32) -> f32) -> TractResult<Ten
     let step_b: Vec<usize> = outer.iter().map(|g| g.step[1]).collect();
     let mut idx = vec![0usize; outer.len()];
     let mut at = [0usize; 2];
+    // A tiled block is walked in chunks of whole rows, the repeated run laid out for one chunk.
+    let chunk = tiled.map_or(0, |t| {
+        (TILE_VALUES / inner.len).clamp(1, t.rows) * inner.len
+    });
     let mut scratch: Vec<f32> = Vec::new();
     let mut scratch_of = None;
     for out_block in y.chunks_exact_mut(block) {
@@ -120,45 +124,58 @@ fn walk(a: &Tensor, b: &Tensor, op: impl Fn(f32, f32) -> f32) -> TractResult<Ten
         match tiled {
             None => run(out_block, inner, &xa[ia..], &xb[ib..], &op),
             Some(t) => {
-                let (run_of, repeated, at_rep) = if t.repeats_b {
+                let (runs_on, repeated, at_rep) = if t.repeats_b {
                     (&xa[ia..], &xb[ib..], ib)
                 } else {
                     (&xb[ib..], &xa[ia..], ia)
                 };
-                let rows_per_chunk = (TILE_VALUES / inner.len).clamp(1, t.rows);
                 if scratch_of != Some(at_rep) {
-                    // The run once, then doubled: a few copies however short the run.
-                    let n = rows_per_chunk * inner.len;
-                    scratch.resize(n, 0.0);
-                    scratch[..inner.len].copy_from_slice(&repeated[..inner.len]);
-                    let mut filled = inner.len;
-                    while filled < n {
-                        let more = filled.min(n - filled);
-                        scratch.copy_within(..more, filled);
-                        filled += more;
-                    }
+                    repeat_into(&mut scratch, &repeated[..inner.len], chunk);
                     scratch_of = Some(at_rep);
                 }
-                for (chunk, from) in out_block
-                    .chunks_mut(rows_per_chunk * inner.len)
-                    .zip(run_of.chunks(rows_per_chunk * inner.len))
-                {
-                    let rep = &scratch[..chunk.len()];
-                    if t.repeats_b {
-                        for ((o, &p), &q) in chunk.iter_mut().zip(from).zip(rep) {
-                            *o = op(p, q);
-                        }
-                    } else {
-                        for ((o, &q), &p) in chunk.iter_mut().zip(from).zip(rep) {
-                            *o = op(p, q);
-                        }
-                    }
-                }
+                run_tiled(out_block, runs_on, &scratch, chunk, t.repeats_b, &op);
             }
         }
         advance(&mut idx, &dims, [&step_a, &step_b], &mut at);
     }
     Ok(out)
+}
+
+/// `scratch` as `n` values of `row` repeated: the run once, then doubled, so a few copies
+/// however short the run.
+fn repeat_into(scratch: &mut Vec<f32>, row: &[f32], n: usize) {
+    scratch.resize(n, 0.0);
+    scratch[..row.len()].copy_from_slice(row);
+    let mut filled = row.len();
+    while filled < n {
+        let more = filled.min(n - filled);
+        scratch.copy_within(..more, filled);
+        filled += more;
+    }
+}
+
+/// One tiled block: `y` against the contiguous operand `runs_on` and the repeated one laid out
+/// in `scratch`, chunk by chunk; `repeats_b` says which side of `op` the repeated one is.
+fn run_tiled(
+    y: &mut [f32],
+    runs_on: &[f32],
+    scratch: &[f32],
+    chunk: usize,
+    repeats_b: bool,
+    op: &impl Fn(f32, f32) -> f32,
+) {
+    for (out, from) in y.chunks_mut(chunk).zip(runs_on.chunks(chunk)) {
+        let rep = &scratch[..out.len()];
+        if repeats_b {
+            for ((o, &p), &q) in out.iter_mut().zip(from).zip(rep) {
+                *o = op(p, q);
+            }
+        } else {
+            for ((o, &q), &p) in out.iter_mut().zip(from).zip(rep) {
+                *o = op(p, q);
+            }
+        }
+    }
 }
 
 /// One inner run of `inner.len` outputs, each operand read contiguously from its slice's start

@@ -88,10 +88,12 @@ pub(crate) fn optimise_before(
     if runs(Pass::RowSoftmaxes) {
         (model, done.row_softmaxes) = softmax::fuse_softmaxes(model)?;
     }
-    if runs(Pass::EagerIm2col) && conv_im2col::pays_off(crate::engine_tract::kernel_family()) {
+    // The two convolution plans measured faster on the AVX-512 kernel tier only.
+    let avx512_convs = conv_im2col::pays_off(crate::engine_tract::kernel_family());
+    if runs(Pass::EagerIm2col) && avx512_convs {
         (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
     }
-    if runs(Pass::UnfoldConvs) && conv_im2col::pays_off(crate::engine_tract::kernel_family()) {
+    if runs(Pass::UnfoldConvs) && avx512_convs {
         (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
     }
     if runs(Pass::Im2colStems) {
