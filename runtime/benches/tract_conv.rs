@@ -5,7 +5,8 @@
 //! on the AVX-512 tier), as tract's matrix product alone on the same GEMM (the im2col operand
 //! given, `[m, k] x [k, n]`, m = output channels, k = 9 x input channels, n = output pixels)
 //! and as the same GEMM through matrixmultiply (ndarray's pure-Rust kernel, AVX2 + FMA, no
-//! AVX-512). FLOPs per call are `2 m k n` (criterion's "elements"); the group names carry the
+//! AVX-512), and, on an AVX-512 CPU, through the engine's own product (`native_unfold_conv`:
+//! `engine_tract::conv_unfold`, patches packed as gathered, `engine_tract::gemm`). FLOPs per call are `2 m k n` (criterion's "elements"); the group names carry the
 //! shape. The `gemm` crate's columns of docs/perf.md were measured with this file at commit
 //! 7174941.
 //!
@@ -14,6 +15,8 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use satmap_runtime::engine_tract::conv_unfold::unfold_convs;
+use satmap_runtime::engine_tract::gemm;
 use tract_nnef::prelude::tract_ndarray::{Array2, linalg::general_mat_mul};
 use tract_nnef::prelude::*;
 use tract_nnef::tract_core::ops::cnn::{Conv, KernelFormat, PaddingSpec, PoolSpec};
@@ -42,6 +45,20 @@ fn values(n: usize, seed: usize) -> Vec<f32> {
 }
 
 fn conv_plan(ci: usize, co: usize, h: usize, w: usize) -> TractResult<Arc<TypedSimplePlan>> {
+    conv_model(ci, co, h, w)?.into_optimized()?.into_runnable()
+}
+
+/// The same convolution through the engine's native product
+/// (`engine_tract::conv_unfold::unfold_convs`), as the engine plans it on the AVX-512 tier.
+fn native_plan(ci: usize, co: usize, h: usize, w: usize) -> TractResult<Arc<TypedSimplePlan>> {
+    let (model, rewritten) = unfold_convs(conv_model(ci, co, h, w)?)?;
+    if rewritten != 1 {
+        return Err(TractError::msg("the pass left the convolution alone"));
+    }
+    model.into_optimized()?.into_runnable()
+}
+
+fn conv_model(ci: usize, co: usize, h: usize, w: usize) -> TractResult<TypedModel> {
     let mut model = TypedModel::default();
     let x = model.add_source("x", f32::fact([1, ci, h, w]))?;
     let weights = Tensor::from_shape(&[co, ci, 3, 3], &values(co * ci * 9, 1))?;
@@ -64,7 +81,7 @@ fn conv_plan(ci: usize, co: usize, h: usize, w: usize) -> TractResult<Arc<TypedS
     };
     let y = model.wire_node("conv", conv, &[x, kernel, bias])?;
     model.select_output_outlets(&y)?;
-    model.into_optimized()?.into_runnable()
+    Ok(model)
 }
 
 fn matmul_plan(m: usize, k: usize, n: usize) -> TractResult<Arc<TypedSimplePlan>> {
@@ -103,6 +120,13 @@ fn bench(crit: &mut Criterion) {
             b.iter(|| conv_eager.run(tvec![black_box(x.clone())]).expect("runs"))
         });
 
+        if gemm::available() {
+            let native = native_plan(ci, co, h, w).expect("native plan");
+            g.bench_function("native_unfold_conv", |b| {
+                b.iter(|| native.run(tvec![black_box(x.clone())]).expect("runs"))
+            });
+        }
+
         let mm = matmul_plan(m, k, n).expect("matmul plan");
         let im2col: TValue = Tensor::from_shape(&[k, n], &values(k * n, 3))
             .expect("operand")
@@ -110,6 +134,25 @@ fn bench(crit: &mut Criterion) {
         g.bench_function("tract_matmul", |b| {
             b.iter(|| mm.run(tvec![black_box(im2col.clone())]).expect("runs"))
         });
+
+        if gemm::available() {
+            // The native product alone, both operands packed beforehand.
+            let pa = gemm::PackedA::from_row_major(&values(m * k, 1), m, k);
+            let pb = gemm::PackedB::from_row_major(&values(k * n, 3), k, n);
+            let mut c = vec![0.0f32; m * n];
+            g.bench_function("native_gemm_packed", |b| {
+                b.iter(|| {
+                    let ops = gemm::Operands {
+                        a: pa.as_slice(),
+                        b: gemm::BSource::Packed(pb.as_slice()),
+                        m,
+                        n,
+                        k,
+                    };
+                    assert!(gemm::product(&ops, black_box(&mut c), gemm::Bias::None));
+                })
+            });
+        }
 
         let a = Array2::from_shape_vec((m, k), values(m * k, 1)).expect("a");
         let bm = Array2::from_shape_vec((k, n), values(k * n, 3)).expect("b");

@@ -1,36 +1,32 @@
-//! The mid-width convolutions as a native unfold and tract's own matrix product.
+//! The convolutions of 64 output channels or more as the native product of their weights and
+//! their input's patches.
 //!
-//! With tract's AVX-512 kernels, the 3x3 convolutions of 64 to 255 output channels (ResNet's
-//! layer1 and layer2, the 7x7 stem) run lazy im2col: the product gathers its image operand panel
-//! by panel, and in `nano`'s image encoder the gather cost about as much as the product (layer1's
-//! `m 64, k 576, n 3840` at 41 GFLOP/s). tract's eager `Im2col` op, which [`conv_im2col`] uses
-//! for the wider ones, spends ~2 ns a value on these shapes and lost. [`unfold_convs`] instead
-//! rewrites such a convolution into [`Unfold`] (the patches as a plain `[k, n]` matrix: one row
-//! per input channel and tap, a shifted copy of the input rows with zeros in the padding, ~0.5 ns
-//! a value) and an `mk,kn->mn` einsum with the weights and the bias, which tract's optimiser
-//! plans as its own matmul with a packed operand. `nano`'s image encoder, per-node profile: its
-//! matmuls 82.4 -> 57-60 ms, plus 7-9 ms of unfold and 5-7 ms of packing, the stage 93 -> 76-84 ms
-//! (docs/perf.md). Wider convolutions are [`conv_im2col`]'s (or lost: layer4 with 512 channels
-//! over 6 x 10 ran slower unfolded), narrower ones keep tract's plan.
+//! tract 0.23.9 runs these with lazy im2col (the product gathers its image operand panel by
+//! panel: 2-5x the bare product on the wide ones), eager im2col (its `Im2col` op spends ~2 ns a
+//! value), or a direct spatial kernel, and its matrix product at 53-57% of an AVX-512 core's
+//! peak (docs/perf.md). [`unfold_convs`] rewrites each such convolution into one
+//! [`UnfoldConv`]: the weights packed once at load for [`gemm::product`], the patches
+//! ([`Unfold`]: one row per input channel and tap, a shifted copy of the input rows with zeros
+//! in the padding) gathered straight into the product's packed blocks as it goes (no `[k, n]`
+//! matrix is ever laid out: the scratch is one block of [`gemm::KC`] x 1,024 values), the bias
+//! added to the finished sums. Narrower convolutions keep tract's plan (the product's 12-row
+//! tiles would be mostly empty); a 1x1 convolution is a matmul after decluttering
+//! ([`super::linear`]).
 //!
-//! Bit for bit: the product runs tract's micro-kernel over the same `k` order (input channel,
-//! then kernel row, then kernel column, the order of tract's own im2col and of the OIHW weights)
-//! and adds the bias after the sum, as tract's convolution does; this module's tests check the
-//! bits against tract's plan of the same convolution, and a 2-frame `nano` drive gives run
-//! digest `a44dec433bc04144` with and without the pass. Measured on `amd-avx512f` only, so the
-//! pass runs on the AVX-512 tier ([`conv_im2col::pays_off`]).
-//!
-//! [`conv_im2col`]: super::conv_im2col
-//! [`conv_im2col::pays_off`]: super::conv_im2col::pays_off
+//! Bit for bit: the product sums `k` in the order of tract's own im2col and of the OIHW weights
+//! (input channel, then kernel row, then kernel column) in one fused multiply-add chain from
+//! zero, and adds the bias after the sum, as tract's convolution does, whichever of its paths
+//! it takes; this module's tests check the bits against tract's plan of the same convolution
+//! and of every stage of the committed default bundle. On the AVX-512 tier only ([`gemm`]).
 
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::Conv;
-use tract_nnef::tract_core::ops::einsum::EinSum;
-use tract_nnef::tract_core::ops::math;
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
-/// `[1, C, H, W]` -> `[C * kh * kw, OH * OW]`: the patches of a 2-D convolution, row
-/// `(c * kh + ky) * kw + kx`, zeros where a tap falls in the padding.
+use super::gemm::{self, NR, PackedA};
+
+/// The patches of a 2-D convolution of `[1, C, H, W]`, as a `[C * kh * kw, OH * OW]` matrix
+/// would hold them: row `(c * kh + ky) * kw + kx`, zeros where a tap falls in the padding.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct Unfold {
     /// Input channels, rows, columns.
@@ -47,100 +43,165 @@ pub struct Unfold {
     pub output: [usize; 2],
 }
 
-impl Op for Unfold {
-    fn name(&self) -> StaticName {
-        "Unfold".into()
-    }
-    op_as_typed_op!();
-}
-
-impl EvalOp for Unfold {
-    op_out_of_plan!();
-
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        let x = args_1!(inputs);
-        let [c_n, h, w] = self.input;
+impl Unfold {
+    /// Patch row `r` (input channel, kernel row, kernel column) of the input planes `xs` for
+    /// the output pixels `p0..p0 + out.len()` into `out`, zeros in the padding and past the
+    /// last pixel.
+    fn row_range(&self, xs: &[f32], r: usize, p0: usize, out: &mut [f32]) {
+        out.fill(0.0);
+        let [_, h, w] = self.input;
         let [kh, kw] = self.kernel;
         let [oh, ow] = self.output;
-        ensure!(x.shape() == [1, c_n, h, w], "Unfold input {:?}", x.shape());
-        let px = x.try_as_plain_ram()?;
-        let xs = px.as_slice::<f32>()?;
-        let n = oh * ow;
-        let mut out = Tensor::zero::<f32>(&[c_n * kh * kw, n])?;
-        let mut po = out.try_as_plain_ram_mut()?;
-        let y = po.as_slice_mut::<f32>()?;
+        let (kx, ky, c) = (r % kw, (r / kw) % kh, r / (kw * kh));
+        let plane = &xs[c * h * w..][..h * w];
+        let p1 = (p0 + out.len()).min(oh * ow);
         let [sy, sx] = self.strides;
         let [dy, dx] = self.dilations;
         let [pt, pl] = self.pad_before;
-        for (row, dst) in y.chunks_exact_mut(n).enumerate() {
-            let kx = row % kw;
-            let ky = (row / kw) % kh;
-            let c = row / (kw * kh);
-            let plane = &xs[c * h * w..][..h * w];
-            for oy in 0..oh {
-                let iy = (oy * sy + ky * dy) as isize - pt as isize;
-                if iy < 0 || iy >= h as isize {
-                    continue;
+        let off = (kx * dx) as isize - pl as isize;
+        for oy in p0 / ow..p1.div_ceil(ow) {
+            let iy = (oy * sy + ky * dy) as isize - pt as isize;
+            if iy < 0 || iy >= h as isize {
+                continue;
+            }
+            let src = &plane[iy as usize * w..][..w];
+            let ox0 = p0.max(oy * ow) - oy * ow;
+            let ox1 = p1.min((oy + 1) * ow) - oy * ow;
+            // d[i] is output column ox0 + i.
+            let d = &mut out[oy * ow + ox0 - p0..][..ox1 - ox0];
+            if sx == 1 {
+                // Contiguous: the run of ox whose ix = ox + off is inside the row.
+                let lo = ox0.max((-off).max(0) as usize);
+                let hi = ox1.min((w as isize - off).max(0) as usize);
+                if lo < hi {
+                    let s = (lo as isize + off) as usize;
+                    d[lo - ox0..hi - ox0].copy_from_slice(&src[s..s + (hi - lo)]);
                 }
-                let src = &plane[iy as usize * w..][..w];
-                let d = &mut dst[oy * ow..][..ow];
-                let off = (kx * dx) as isize - pl as isize;
-                if sx == 1 {
-                    // Contiguous: the run of ox whose ix = ox + off is inside the row.
-                    let lo = (-off).max(0) as usize;
-                    let hi = ((w as isize - off).min(ow as isize)).max(0) as usize;
-                    if lo < hi {
-                        let s = (lo as isize + off) as usize;
-                        d[lo..hi].copy_from_slice(&src[s..s + (hi - lo)]);
-                    }
-                } else {
-                    for (ox, v) in d.iter_mut().enumerate() {
-                        let ix = (ox * sx) as isize + off;
-                        if ix >= 0 && ix < w as isize {
-                            *v = src[ix as usize];
-                        }
+            } else {
+                for (i, v) in d.iter_mut().enumerate() {
+                    let ix = ((ox0 + i) * sx) as isize + off;
+                    if ix >= 0 && ix < w as isize {
+                        *v = src[ix as usize];
                     }
                 }
             }
         }
+    }
+
+    /// Depth rows `pc..pc + kc` of B panels `j..` (output pixels `j * NR..`) into `dst`, one
+    /// panel after the other, [`NR`] values a row ([`gemm::BSource::Fill`]).
+    fn fill_panels(&self, xs: &[f32], (j, pc, kc): (usize, usize, usize), dst: &mut [f32]) {
+        let mut row = [0.0f32; gemm::FILL_PANELS * NR];
+        let panels = dst.len() / (kc * NR);
+        let row = &mut row[..panels * NR];
+        for r in 0..kc {
+            self.row_range(xs, pc + r, j * NR, row);
+            for (jl, piece) in row.chunks_exact(NR).enumerate() {
+                dst[(jl * kc + r) * NR..][..NR].copy_from_slice(piece);
+            }
+        }
+    }
+}
+
+/// A convolution as the native product ([`gemm::product`]) of its weights, packed at load, and
+/// its input's patches ([`Unfold`]), gathered straight into the product's packed blocks; the
+/// bias added to the finished sums.
+#[derive(Clone, Debug)]
+pub struct UnfoldConv {
+    /// The patches.
+    pub unfold: Unfold,
+    /// Output channels.
+    pub out_channels: usize,
+    weights: Arc<PackedA>,
+    bias: Arc<Vec<f32>>,
+}
+
+impl PartialEq for UnfoldConv {
+    fn eq(&self, other: &Self) -> bool {
+        self.unfold == other.unfold
+            && self.out_channels == other.out_channels
+            && Arc::ptr_eq(&self.weights, &other.weights)
+            && Arc::ptr_eq(&self.bias, &other.bias)
+    }
+}
+impl Eq for UnfoldConv {}
+
+impl Op for UnfoldConv {
+    fn name(&self) -> StaticName {
+        "UnfoldConv".into()
+    }
+    op_as_typed_op!();
+}
+
+impl EvalOp for UnfoldConv {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let x = args_1!(inputs);
+        let [c_n, h, w] = self.unfold.input;
+        let [kh, kw] = self.unfold.kernel;
+        let [oh, ow] = self.unfold.output;
+        ensure!(
+            x.shape() == [1, c_n, h, w],
+            "UnfoldConv input {:?}",
+            x.shape()
+        );
+        let px = x.try_as_plain_ram()?;
+        let xs = px.as_slice::<f32>()?;
+        let co = self.out_channels;
+        let mut out = Tensor::zero::<f32>(&[1, co, oh, ow])?;
+        let mut po = out.try_as_plain_ram_mut()?;
+        let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
+            self.unfold.fill_panels(xs, (j, pc, kc), dst);
+        };
+        let ops = gemm::Operands {
+            a: self.weights.as_slice(),
+            b: gemm::BSource::Fill(&fill),
+            m: co,
+            n: oh * ow,
+            k: c_n * kh * kw,
+        };
+        ensure!(
+            gemm::product(
+                &ops,
+                po.as_slice_mut::<f32>()?,
+                gemm::Bias::PerRow(&self.bias)
+            ),
+            "native product refused (AVX-512 missing or operands mis-sized)"
+        );
         Ok(tvec!(out.into_tvalue()))
     }
 }
 
-impl TypedOp for Unfold {
+impl TypedOp for UnfoldConv {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
         ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        let [c, _, _] = self.input;
-        let [kh, kw] = self.kernel;
-        let [oh, ow] = self.output;
-        Ok(tvec!(f32::fact([c * kh * kw, oh * ow])))
+        let [oh, ow] = self.unfold.output;
+        Ok(tvec!(f32::fact([1, self.out_channels, oh, ow])))
+    }
+
+    fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
+        let [c, _, _] = self.unfold.input;
+        let [kh, kw] = self.unfold.kernel;
+        let [oh, ow] = self.unfold.output;
+        let fma = self.out_channels * c * kh * kw * oh * ow;
+        Ok(tvec!((Cost::FMA(f32::datum_type()), fma.to_dim())))
     }
 
     as_op!();
 }
 
-/// Output channels from which a convolution is unfolded (below, the product's m tiles are
+/// Output channels from which a convolution is unfolded (below, the product's 12-row tiles are
 /// mostly empty and tract's plan is kept).
 pub const MIN_OUTPUT_CHANNELS: usize = 64;
-/// Output channels from which a convolution is left to [`conv_im2col`](super::conv_im2col)
-/// (unfolding layer4's 512 channels lost).
-pub const MAX_OUTPUT_CHANNELS: usize = 256;
-/// The largest unfolded operand (`k x n` f32), as [`conv_im2col::MAX_SCRATCH_BYTES`]: RAM on
-/// top of the stage's.
-///
-/// [`conv_im2col::MAX_SCRATCH_BYTES`]: super::conv_im2col::MAX_SCRATCH_BYTES
-pub const MAX_SCRATCH_BYTES: usize = super::conv_im2col::MAX_SCRATCH_BYTES;
 
 /// Rewrite every f32 convolution of a decluttered `model` with one group, NCHW over two
-/// spatial axes, batch 1, constant weights and bias, more than one tap, [`MIN_OUTPUT_CHANNELS`]
-/// to [`MAX_OUTPUT_CHANNELS`] (excluded) outputs and an unfolded operand within
-/// [`MAX_SCRATCH_BYTES`] into [`Unfold`] and a matmul; returns the model and the number
-/// rewritten.
+/// spatial axes, batch 1, constant weights and bias and at least [`MIN_OUTPUT_CHANNELS`]
+/// outputs into an [`UnfoldConv`]; returns the model and the number rewritten.
 ///
 /// # Errors
 /// tract refusing a patch (an inconsistent model).
 pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
-    let (lo, hi) = (MIN_OUTPUT_CHANNELS, MAX_OUTPUT_CHANNELS);
     let names: Vec<String> = model.nodes().iter().map(|n| n.name.clone()).collect();
     let mut done = 0;
     for name in names {
@@ -153,8 +214,7 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
             || conv.group != 1
             || conv.pool_spec.data_format != DataFormat::NCHW
             || conv.pool_spec.kernel_shape.len() != 2
-            || conv.output_channels() < lo
-            || conv.output_channels() >= hi
+            || conv.output_channels() < MIN_OUTPUT_CHANNELS
         {
             continue;
         }
@@ -175,13 +235,13 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         let co = conv.output_channels();
         let ks = &conv.pool_spec.kernel_shape;
         let (kh, kw) = (ks[0], ks[1]);
-        if kh * kw < 2 || kernel.shape() != [co, ci, kh, kw] {
+        if kernel.shape() != [co, ci, kh, kw] {
             continue;
         }
         let pads = conv.pool_spec.computed_padding(&[h, w]);
         let (oh, ow) = (pads[0].convoluted, pads[1].convoluted);
         let k = ci * kh * kw;
-        if k * oh * ow * size_of::<f32>() > MAX_SCRATCH_BYTES || oh * ow == 0 {
+        if oh * ow == 0 {
             continue;
         }
         let strides = conv.pool_spec.strides();
@@ -203,34 +263,17 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         } else {
             continue;
         };
+        let kernel_plain = kernel.try_as_plain_ram()?;
+        let weights = PackedA::from_row_major(kernel_plain.as_slice::<f32>()?, co, k);
+        let op = UnfoldConv {
+            unfold,
+            out_channels: co,
+            weights: Arc::new(weights),
+            bias: Arc::new(bias_vals),
+        };
         let mut patch = TypedModelPatch::default();
         let x = patch.tap_model(&model, node.inputs[0])?;
-        let cols = patch.wire_node(format!("{name}.unfold"), unfold, &[x])?[0];
-        let wk = kernel.into_tensor().into_shape(&[co, k])?;
-        let wk = patch.add_const(format!("{name}.unfold_weights"), wk)?;
-        let mm = patch.wire_node(
-            format!("{name}.unfold_mm"),
-            EinSum {
-                axes: "mk,kn->mn".parse()?,
-                operating_dt: f32::datum_type(),
-                q_params: None,
-            },
-            &[wk, cols],
-        )?[0];
-        let b = patch.add_const(
-            format!("{name}.unfold_bias"),
-            Tensor::from_shape(&[co, 1], &bias_vals)?,
-        )?;
-        let y = patch.wire_node(format!("{name}.unfold_bias_add"), math::add(), &[mm, b])?[0];
-        let y = patch.wire_node(
-            format!("{name}.unfold_shape"),
-            AxisOp::Reshape(
-                0,
-                tvec![co.to_dim(), (oh * ow).to_dim()],
-                tvec![1.to_dim(), co.to_dim(), oh.to_dim(), ow.to_dim()],
-            ),
-            &[y],
-        )?[0];
+        let y = patch.wire_node(format!("{name}.unfold_conv"), op, &[x])?[0];
         patch.shunt_outside(&model, OutletId::new(id, 0), y)?;
         patch.apply(&mut model)?;
         done += 1;
@@ -253,9 +296,14 @@ mod tests {
 
     #[test]
     fn resnet_shapes_run_unfolded_with_tracts_bits() {
+        if !gemm::available() {
+            eprintln!("no AVX-512 here: the pass does not run on this CPU");
+            return;
+        }
         let cases = [
             // `nano`'s layer1 (64 -> 64 over 48 x 80), a layer2 entry (stride 2), the stem
-            // (7x7, stride 2, padding 3), a dilated one, and odd maps that leave border pixels.
+            // (7x7, stride 2, padding 3), a dilated one, odd maps that leave border pixels,
+            // and layer3 and layer4 widths (a 1x1 convolution is a matmul after decluttering).
             ConvShape::new(64, 64, [48, 80], 3, 1, 1),
             ConvShape::new(64, 128, [48, 80], 3, 2, 1),
             ConvShape::new(3, 64, [96, 160], 7, 2, 3),
@@ -264,12 +312,14 @@ mod tests {
                 ..ConvShape::new(32, 64, [13, 17], 3, 1, 2)
             },
             ConvShape::new(16, 96, [11, 9], 3, 2, 0),
+            ConvShape::new(128, 256, [12, 20], 3, 1, 1),
+            ConvShape::new(300, 512, [6, 10], 3, 1, 1),
         ];
         for s in cases {
             let (model, inputs) = conv_model(&s);
             let (unfolded, n) = unfold_convs(model.clone()).unwrap();
             assert_eq!(n, 1, "{} -> {}", s.ci, s.co);
-            assert!(unfolded.nodes().iter().any(|n| n.op_is::<Unfold>()));
+            assert!(unfolded.nodes().iter().any(|n| n.op_is::<UnfoldConv>()));
             let want = run_optimized(model, &inputs);
             let got = run_optimized(unfolded, &inputs);
             assert_eq!(got[0].shape(), want[0].shape(), "{} -> {}", s.ci, s.co);
@@ -278,25 +328,17 @@ mod tests {
     }
 
     #[test]
-    fn narrow_and_wide_convolutions_keep_tracts_plan() {
-        // 32 outputs (below the product's useful m); 256 (conv_im2col's).
-        for s in [
-            ConvShape::new(64, 32, [24, 40], 3, 1, 1),
-            ConvShape::new(128, 256, [12, 20], 3, 1, 1),
-        ] {
-            let (model, _) = conv_model(&s);
-            let (same, n) = unfold_convs(model).unwrap();
-            assert_eq!(n, 0, "{} -> {}", s.ci, s.co);
-            assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
-        }
-        // A 1x1 convolution (one tap) is a matmul already.
-        let (model, _) = conv_model(&ConvShape::new(64, 64, [24, 40], 1, 1, 0));
-        assert_eq!(unfold_convs(model).unwrap().1, 0);
+    fn narrow_convolutions_keep_tracts_plan() {
+        // 32 outputs: below the product's useful m.
+        let (model, _) = conv_model(&ConvShape::new(64, 32, [24, 40], 3, 1, 1));
+        let (same, n) = unfold_convs(model).unwrap();
+        assert_eq!(n, 0);
+        assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
     }
 
     #[test]
     fn a_wrong_input_is_an_error_value() {
-        let op = Unfold {
+        let unfold = Unfold {
             input: [2, 4, 4],
             kernel: [3, 3],
             strides: [1, 1],
@@ -304,8 +346,40 @@ mod tests {
             pad_before: [1, 1],
             output: [4, 4],
         };
+        let op = UnfoldConv {
+            unfold,
+            out_channels: 1,
+            weights: Arc::new(PackedA::from_row_major(&[0.5; 18], 1, 18)),
+            bias: Arc::new(vec![0.0]),
+        };
         let x = Tensor::zero::<f32>(&[1, 3, 4, 4]).unwrap();
         assert!(op.eval_out_of_plan(tvec!(x.into_tvalue())).is_err());
+    }
+
+    #[test]
+    fn patch_rows_are_the_shifted_input_with_zero_padding() {
+        // 1 channel 3 x 4, 3x3 taps, padding 1, stride 1: tap (0, 0) of output pixel (0, 0)
+        // falls in the padding, of pixel (1, 1) on input (0, 0).
+        let unfold = Unfold {
+            input: [1, 3, 4],
+            kernel: [3, 3],
+            strides: [1, 1],
+            dilations: [1, 1],
+            pad_before: [1, 1],
+            output: [3, 4],
+        };
+        let xs: Vec<f32> = (1..=12).map(|v| v as f32).collect();
+        let mut row = vec![f32::NAN; 16];
+        unfold.row_range(&xs, 0, 0, &mut row);
+        let want = [
+            0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 0.0, 5.0, 6.0, 7.0, 0.0, 0.0, 0.0, 0.0,
+        ];
+        assert_eq!(row, want);
+        // The same row from pixel 5 on, past the last pixel zero.
+        let mut part = vec![f32::NAN; 9];
+        unfold.row_range(&xs, 0, 5, &mut part);
+        assert_eq!(&part[..7], &want[5..12]);
+        assert!(part[7..].iter().all(|&v| v == 0.0));
     }
 
     #[test]

@@ -27,6 +27,8 @@ pub mod conv_direct;
 pub mod conv_im2col;
 pub mod conv_unfold;
 pub mod fold;
+pub mod gemm;
+pub mod linear;
 pub mod natural_consts;
 pub mod rewrite;
 pub mod softmax;

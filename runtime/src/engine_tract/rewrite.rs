@@ -17,8 +17,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    bilinear, broadcast, conv_direct, conv_im2col, conv_unfold, fold, natural_consts, softmax,
-    weighted_sum,
+    bilinear, broadcast, conv_direct, conv_im2col, conv_unfold, fold, linear, natural_consts,
+    softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -37,9 +37,12 @@ pub struct Rewrites {
     /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]; 0 where
     /// it does not pay off, [`conv_im2col::pays_off`]).
     pub eager_im2col_convs: usize,
-    /// Convolutions of 64 to 255 outputs run as [`conv_unfold::Unfold`] and tract's matmul
-    /// ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only, as eager im2col).
+    /// Convolutions of 64 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
+    /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
     pub unfolded_convs: usize,
+    /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on the
+    /// AVX-512 tier only).
+    pub native_linears: usize,
     /// Convolutions tract would run direct spatial planned with im2col and its matmul instead
     /// ([`conv_direct::im2col_wide_stems`]: the image stems of 64 channels or more).
     pub im2col_stems: usize,
@@ -57,8 +60,9 @@ pub(crate) enum Pass {
     WeightedSums,
     BilinearSamplers,
     RowSoftmaxes,
-    EagerIm2col,
     UnfoldConvs,
+    EagerIm2col,
+    NativeLinears,
     Im2colStems,
     Fold,
     BroadcastBinaries,
@@ -90,11 +94,14 @@ pub(crate) fn optimise_before(
     }
     // The two convolution plans measured faster on the AVX-512 kernel tier only.
     let avx512_convs = conv_im2col::pays_off(crate::engine_tract::kernel_family());
+    if runs(Pass::UnfoldConvs) && avx512_convs {
+        (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
+    }
     if runs(Pass::EagerIm2col) && avx512_convs {
         (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
     }
-    if runs(Pass::UnfoldConvs) && avx512_convs {
-        (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
+    if runs(Pass::NativeLinears) && avx512_convs {
+        (model, done.native_linears) = linear::native_linears(model)?;
     }
     if runs(Pass::Im2colStems) {
         (model, done.im2col_stems) = conv_direct::im2col_wide_stems(model)?;

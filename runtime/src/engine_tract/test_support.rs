@@ -78,8 +78,13 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     } else {
         [2, 4, 0, 31, 2]
     };
+    // Linear layers run natively on the AVX-512 tier: the image encoder's 1x1 projection,
+    // bev_query's value/offset/weight/output projections, bev_encoder's, the Swin blocks' and
+    // the decoder's (per stage, `Stage::ALL` order).
+    let linears = if avx512 { [1, 6, 3, 18, 19] } else { [0; 5] };
     let none = Rewrites {
         broadcast_binaries: broadcast[stage as usize],
+        native_linears: linears[stage as usize],
         ..Rewrites::default()
     };
     match stage {

@@ -1,0 +1,219 @@
+//! The AVX-512 micro-kernel: one [`MR`] x [`NR`] tile of C over one block of `k`.
+//!
+//! 24 accumulators (12 rows x two 16-lane vectors along the row), per `k` two vector loads of
+//! B and 12 broadcasts of A for 24 fused multiply-adds: the multiply-adds, not the loads, set
+//! the pace (tract's 16x12 tile loads once per multiply-add, and uses 12 of the 32 registers).
+//! Each output is `acc = fma(a[k], b[k], acc)` for `k` ascending, `acc` starting at zero in the
+//! first block and at the stored partial sum after it (an f32 store and load is exact): the
+//! chain tract's f32 kernels compute, whatever the blocking.
+
+use super::pack::{MR, NR};
+
+/// What the tile adds to the finished sums (last block only), after the sum as tract does.
+#[derive(Clone, Copy, Debug)]
+pub enum TileBias<'a> {
+    /// Nothing.
+    None,
+    /// One value a row: the tile's [`MR`] rows (fewer at the edge).
+    PerRow(&'a [f32]),
+    /// One value a column: the tile's [`NR`] columns (fewer at the edge).
+    PerCol(&'a [f32]),
+}
+
+/// One tile's place in C and its block of `k`.
+pub struct Tile<'a> {
+    /// `kc x MR` packed values of A.
+    pub a: &'a [f32],
+    /// `kc x NR` packed values of B.
+    pub b: &'a [f32],
+    /// C from the tile's first value: row `r` at `r * ldc`, at least `rows` rows of `cols`.
+    pub c: &'a mut [f32],
+    /// C's row stride.
+    pub ldc: usize,
+    /// Valid rows (`1..=MR`).
+    pub rows: usize,
+    /// Valid columns (`1..=NR`).
+    pub cols: usize,
+    /// Continue the sums stored in C (every block of `k` but the first).
+    pub accumulate: bool,
+    /// Added after the last block.
+    pub bias: TileBias<'a>,
+}
+
+/// Whether this CPU runs [`run`].
+#[must_use]
+pub fn available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Run one tile. Returns `false` (C untouched) on a CPU without AVX-512 or a tile whose slices
+/// are too short for its sizes: callers size them, so that is a bug, never input.
+pub fn run(t: Tile<'_>) -> bool {
+    let Tile {
+        a,
+        b,
+        c,
+        ldc,
+        rows,
+        cols,
+        accumulate,
+        bias,
+    } = t;
+    let kc = a.len() / MR;
+    let sized = (1..=MR).contains(&rows)
+        && (1..=NR).contains(&cols)
+        && b.len() >= kc * NR
+        && c.len() >= (rows - 1) * ldc + cols
+        && match bias {
+            TileBias::None => true,
+            TileBias::PerRow(v) => v.len() >= rows,
+            TileBias::PerCol(v) => v.len() >= cols,
+        };
+    if !sized || !available() {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: AVX-512F is present (checked above) and every pointer the kernel forms stays
+    // inside the slices (checked above): `kc` steps of MR values of `a` and NR of `b`, rows
+    // `< rows` of C at `ldc` apart with lanes `< cols` (masked), bias lanes `< rows` / `< cols`.
+    unsafe {
+        avx512::tile(a, b, c.as_mut_ptr(), (ldc, rows, cols, accumulate), bias);
+    }
+    true
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use core::arch::x86_64::*;
+
+    use super::{MR, NR, TileBias};
+
+    /// Lane masks of the two vectors of a row for `cols` valid columns.
+    fn masks(cols: usize) -> (__mmask16, __mmask16) {
+        let lo = if cols >= 16 {
+            0xffff
+        } else {
+            (1u32 << cols) - 1
+        };
+        let hi = if cols >= NR {
+            0xffff
+        } else if cols > 16 {
+            (1u32 << (cols - 16)) - 1
+        } else {
+            0
+        };
+        (lo as __mmask16, hi as __mmask16)
+    }
+
+    /// Expands `$body!(r)` for the 12 rows, with `r` a literal (the accumulators stay in
+    /// registers only if every index is a constant).
+    macro_rules! rows {
+        ($body:ident) => {
+            $body!(0);
+            $body!(1);
+            $body!(2);
+            $body!(3);
+            $body!(4);
+            $body!(5);
+            $body!(6);
+            $body!(7);
+            $body!(8);
+            $body!(9);
+            $body!(10);
+            $body!(11);
+        };
+    }
+
+    #[target_feature(enable = "avx512f")]
+    /// `a`, `b` hold `kc` steps of the panels; `c` and `(ldc, rows, cols, accumulate)` as in
+    /// [`super::Tile`].
+    pub(super) unsafe fn tile(
+        a: &[f32],
+        b: &[f32],
+        c: *mut f32,
+        (ldc, rows, cols, accumulate): (usize, usize, usize, bool),
+        bias: TileBias<'_>,
+    ) {
+        const _: () = assert!(MR == 12 && NR == 32);
+        let kc = a.len() / MR;
+        let (m0, m1) = masks(cols);
+        let zero = _mm512_setzero_ps();
+        let mut acc = [[zero; 2]; MR];
+        unsafe {
+            if accumulate {
+                macro_rules! load {
+                    ($r:literal) => {
+                        if $r < rows {
+                            let p = c.add($r * ldc);
+                            acc[$r][0] = _mm512_maskz_loadu_ps(m0, p);
+                            acc[$r][1] = _mm512_maskz_loadu_ps(m1, p.add(16));
+                        }
+                    };
+                }
+                rows!(load);
+            }
+            let (mut ap, mut bp) = (a.as_ptr(), b.as_ptr());
+            // Loads through the masked intrinsic: `_mm512_loadu_ps` is a `copy_nonoverlapping`
+            // whose precondition checks (on in the test profile's debug assertions) sent every
+            // vector through the stack, at half the speed.
+            let all = 0xffff;
+            for _ in 0..kc {
+                let b0 = _mm512_maskz_loadu_ps(all, bp);
+                let b1 = _mm512_maskz_loadu_ps(all, bp.add(16));
+                macro_rules! step {
+                    ($r:literal) => {
+                        let x = _mm512_set1_ps(*ap.add($r));
+                        acc[$r][0] = _mm512_fmadd_ps(x, b0, acc[$r][0]);
+                        acc[$r][1] = _mm512_fmadd_ps(x, b1, acc[$r][1]);
+                    };
+                }
+                rows!(step);
+                ap = ap.add(MR);
+                bp = bp.add(NR);
+            }
+            match bias {
+                TileBias::None => {}
+                TileBias::PerRow(b) => {
+                    macro_rules! row_bias {
+                        ($r:literal) => {
+                            if $r < rows {
+                                let v = _mm512_set1_ps(b[$r]);
+                                acc[$r][0] = _mm512_add_ps(acc[$r][0], v);
+                                acc[$r][1] = _mm512_add_ps(acc[$r][1], v);
+                            }
+                        };
+                    }
+                    rows!(row_bias);
+                }
+                TileBias::PerCol(b) => {
+                    let v0 = _mm512_maskz_loadu_ps(m0, b.as_ptr());
+                    let v1 = _mm512_maskz_loadu_ps(m1, b.as_ptr().add(16));
+                    macro_rules! col_bias {
+                        ($r:literal) => {
+                            acc[$r][0] = _mm512_add_ps(acc[$r][0], v0);
+                            acc[$r][1] = _mm512_add_ps(acc[$r][1], v1);
+                        };
+                    }
+                    rows!(col_bias);
+                }
+            }
+            macro_rules! store {
+                ($r:literal) => {
+                    if $r < rows {
+                        let p = c.add($r * ldc);
+                        _mm512_mask_storeu_ps(p, m0, acc[$r][0]);
+                        _mm512_mask_storeu_ps(p.add(16), m1, acc[$r][1]);
+                    }
+                };
+            }
+            rows!(store);
+        }
+    }
+}

@@ -1,0 +1,374 @@
+//! The native f32 matrix product the engine runs its large products on (AVX-512 tier).
+//!
+//! `C[m, n] = A[m, k] B[k, n]`, then a bias per row or column, with the operands packed into
+//! panels ([`pack`]) and `k` taken in blocks of [`KC`] so that a block of an A panel stays in
+//! L1 while the B panels of a column block ([`NC_PANELS`]) stream from L2; the micro-kernel
+//! ([`kernel`]) keeps a 12 x 32 tile of C in 24 registers. tract 0.23.9 runs these products
+//! with a 16 x 12 tile over the whole of `k` (one load per multiply-add, panels streamed from
+//! L2 or beyond) at 53-57% of this core's peak (docs/perf.md).
+//!
+//! Bits: every output is one fused multiply-add chain over `k` ascending from zero, and the
+//! bias is added to the finished sum: what tract's f32 kernels compute (their tiles hold one
+//! accumulator per output and start from zero; each rewrite's tests compare with tract's plan
+//! bit for bit). The threads split the rows of C in whole panels; an output's arithmetic does
+//! not depend on which thread computes it, so the bits hold for any thread count.
+
+pub mod kernel;
+pub mod pack;
+
+use rayon::prelude::*;
+use tract_linalg::multithread::{Executor, current_tract_executor};
+
+pub use kernel::{TileBias, available};
+pub use pack::{AlignedBuf, MR, NR, PackedA, PackedB, panels};
+
+/// `k` a block: 12 x 256 f32 of an A panel (12 KiB) stay in L1 across a column block.
+pub const KC: usize = 256;
+/// B panels a column block: 256 x 1024 f32 (1 MiB) stay in L2 across the A panels.
+pub const NC_PANELS: usize = 32;
+
+/// Panels a [`BSource::Fill`] call fills at most (256 columns: one gather of a patch row
+/// serves 8 panels).
+pub const FILL_PANELS: usize = 8;
+
+/// What the product adds to the finished sums.
+#[derive(Clone, Copy, Debug)]
+pub enum Bias<'a> {
+    /// Nothing.
+    None,
+    /// `m` values, one a row of C (a convolution's output channels).
+    PerRow(&'a [f32]),
+    /// `n` values, one a column of C (a linear layer's outputs).
+    PerCol(&'a [f32]),
+}
+
+/// `fill(j, pc, kc, dst)` of [`BSource::Fill`].
+pub type FillPanels<'a> = dyn Fn(usize, usize, usize, &mut [f32]) + Sync + 'a;
+
+/// Where the product reads B.
+#[derive(Clone, Copy)]
+pub enum BSource<'a> {
+    /// Packed once ([`PackedB::as_slice`]): panel `j` whole in `k`.
+    Packed(&'a [f32]),
+    /// Packed block by block as the product goes: `fill(j, pc, kc, dst)` writes depth rows
+    /// `pc..pc + kc` of panels `j..j + dst.len() / (kc * NR)` into `dst`, one panel after the
+    /// other (`NR` values a row, zeros past the last column). Called from the engine's threads
+    /// with up to [`FILL_PANELS`] panels at a time.
+    Fill(&'a FillPanels<'a>),
+}
+
+/// The operands of one product.
+#[derive(Clone, Copy)]
+pub struct Operands<'a> {
+    /// A in panels of [`MR`] rows (panel `i` at `i * MR * k`).
+    pub a: &'a [f32],
+    /// B.
+    pub b: BSource<'a>,
+    /// Rows of C.
+    pub m: usize,
+    /// Columns of C.
+    pub n: usize,
+    /// Depth.
+    pub k: usize,
+}
+
+/// The product into `c` (row-major `m x n`) on the engine's threads: the blocks of B filled
+/// panel by panel, then the rows of C in whole A panels. `false` (C in an unspecified state)
+/// for operands or a bias shorter than their sizes, or a CPU without AVX-512: the rewrites that
+/// plan this product check both, so that is a bug, never input.
+#[must_use]
+pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
+    let Operands { a, b, m, n, k } = *ops;
+    let n_panels = panels(n, NR);
+    let sized = a.len() >= panels(m, MR) * MR * k
+        && match b {
+            BSource::Packed(all) => all.len() >= n_panels * NR * k,
+            BSource::Fill(_) => true,
+        }
+        && match bias {
+            Bias::None => true,
+            Bias::PerRow(v) => v.len() >= m,
+            Bias::PerCol(v) => v.len() >= n,
+        };
+    if !sized || c.len() != m * n || !available() {
+        return false;
+    }
+    if m == 0 || n == 0 {
+        return true;
+    }
+    if k == 0 {
+        for (r, row) in c.chunks_exact_mut(n).enumerate() {
+            for (col, v) in row.iter_mut().enumerate() {
+                *v = match bias {
+                    Bias::None => 0.0,
+                    Bias::PerRow(b) => 0.0 + b[r],
+                    Bias::PerCol(b) => 0.0 + b[col],
+                };
+            }
+        }
+        return true;
+    }
+    let mut scratch = match b {
+        BSource::Fill(_) => AlignedBuf::zeros(NC_PANELS.min(n_panels) * KC.min(k) * NR),
+        BSource::Packed(_) => AlignedBuf::zeros(0),
+    };
+    let rows_per_task = MR * panels(m, MR).div_ceil(2 * threads()).max(1);
+    for jc in (0..n_panels).step_by(NC_PANELS) {
+        let js = jc..(jc + NC_PANELS).min(n_panels);
+        for pc in (0..k).step_by(KC) {
+            let kc = KC.min(k - pc);
+            let block = Block {
+                js: js.clone(),
+                pc,
+                kc,
+                b: match b {
+                    BSource::Packed(all) => BlockB::Whole(all, k),
+                    BSource::Fill(fill) => {
+                        let dst = &mut scratch.as_mut_slice()[..js.len() * kc * NR];
+                        let filled = on_threads(dst, FILL_PANELS * kc * NR, |t, panels| {
+                            fill(jc + t * FILL_PANELS, pc, kc, panels);
+                            true
+                        });
+                        if !filled {
+                            return false;
+                        }
+                        BlockB::Block(dst)
+                    }
+                },
+            };
+            let done = on_threads(&mut c[..], rows_per_task * n, |t, rows| {
+                block.tiles(a, (t * rows_per_task / MR, rows), (n, k), bias)
+            });
+            if !done {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// One block of the product: B panels `js` over depth rows `pc..pc + kc`.
+struct Block<'a> {
+    js: std::ops::Range<usize>,
+    pc: usize,
+    kc: usize,
+    b: BlockB<'a>,
+}
+
+/// Where a block's B panels are.
+enum BlockB<'a> {
+    /// In the whole packed B of depth `.1`.
+    Whole(&'a [f32], usize),
+    /// In a block packed for it (panel `js.start` first).
+    Block(&'a [f32]),
+}
+
+impl Block<'_> {
+    /// The block's tiles over the rows of C from A panel `first` (`rows`: whole rows of C).
+    fn tiles(
+        &self,
+        a: &[f32],
+        (first, rows): (usize, &mut [f32]),
+        (n, k): (usize, usize),
+        bias: Bias<'_>,
+    ) -> bool {
+        let Self { pc, kc, .. } = *self;
+        let last = pc + kc == k;
+        let rows_here = rows.len() / n;
+        for ii in 0..rows_here.div_ceil(MR) {
+            let i = first + ii;
+            let a_blk = &a[(i * k + pc) * MR..][..kc * MR];
+            for j in self.js.clone() {
+                let b_blk = match self.b {
+                    BlockB::Whole(all, depth) => &all[(j * depth + pc) * NR..][..kc * NR],
+                    BlockB::Block(blk) => &blk[(j - self.js.start) * kc * NR..][..kc * NR],
+                };
+                let tile_bias = match bias {
+                    _ if !last => TileBias::None,
+                    Bias::None => TileBias::None,
+                    Bias::PerRow(v) => TileBias::PerRow(&v[i * MR..]),
+                    Bias::PerCol(v) => TileBias::PerCol(&v[j * NR..]),
+                };
+                let done = kernel::run(kernel::Tile {
+                    a: a_blk,
+                    b: b_blk,
+                    c: &mut rows[ii * MR * n + j * NR..],
+                    ldc: n,
+                    rows: MR.min(rows_here - ii * MR),
+                    cols: NR.min(n - j * NR),
+                    accumulate: pc > 0,
+                    bias: tile_bias,
+                });
+                if !done {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+/// Threads of the engine's pool (1 outside one).
+fn threads() -> usize {
+    match current_tract_executor() {
+        Executor::MultiThread(pool) => pool.current_num_threads(),
+        _ => 1,
+    }
+}
+
+/// `task(index, chunk)` over `data` in chunks of `chunk` values, on the engine's pool; `false`
+/// when a task returned it.
+pub fn on_threads<F>(data: &mut [f32], chunk: usize, task: F) -> bool
+where
+    F: Fn(usize, &mut [f32]) -> bool + Sync,
+{
+    let chunk = chunk.max(1);
+    match current_tract_executor() {
+        Executor::MultiThread(pool) => pool.install(|| {
+            data.par_chunks_mut(chunk)
+                .enumerate()
+                .all(|(i, c)| task(i, c))
+        }),
+        // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
+        _ => data.chunks_mut(chunk).enumerate().all(|(i, c)| task(i, c)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The product against a scalar fused multiply-add chain (`f32::mul_add`, `k` ascending
+    //! from zero, the bias after), bit for bit, over shapes with edge tiles in every direction,
+    //! `k` across block boundaries, and one and two threads.
+    use super::*;
+    use crate::engine_tract::gemm::pack::pack_a;
+
+    /// Deterministic values in [-1, 1) with all mantissa bits in play.
+    fn values(len: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+        (0..len)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+            })
+            .collect()
+    }
+
+    fn chain(a: &[f32], b: &[f32], m: usize, n: usize, k: usize, bias: Bias<'_>) -> Vec<u32> {
+        let mut out = Vec::with_capacity(m * n);
+        for r in 0..m {
+            for c in 0..n {
+                let mut acc = 0.0f32;
+                for kk in 0..k {
+                    acc = a[r * k + kk].mul_add(b[kk * n + c], acc);
+                }
+                let v = match bias {
+                    Bias::None => acc,
+                    Bias::PerRow(v) => acc + v[r],
+                    Bias::PerCol(v) => acc + v[c],
+                };
+                out.push(v.to_bits());
+            }
+        }
+        out
+    }
+
+    fn run(m: usize, n: usize, k: usize, per_row: bool) -> (Vec<u32>, Vec<u32>) {
+        let a = values(m * k, 1 + m as u64);
+        let b = values(k * n, 2 + n as u64);
+        let bias_v = values(m.max(n), 3);
+        let bias = if per_row {
+            Bias::PerRow(&bias_v)
+        } else {
+            Bias::PerCol(&bias_v)
+        };
+        let pa = PackedA::from_row_major(&a, m, k);
+        let pb = PackedB::from_row_major(&b, k, n);
+        let mut ops = Operands {
+            a: pa.as_slice(),
+            b: BSource::Packed(pb.as_slice()),
+            m,
+            n,
+            k,
+        };
+        let mut c = vec![f32::NAN; m * n];
+        assert!(product(&ops, &mut c, bias), "{m} x {n} x {k}");
+        let got: Vec<u32> = c.iter().map(|v| v.to_bits()).collect();
+        // B filled block by block gives the same bits.
+        let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
+            for (jl, panel) in dst.chunks_exact_mut(kc * NR).enumerate() {
+                panel.copy_from_slice(&pb.as_slice()[((j + jl) * k + pc) * NR..][..kc * NR]);
+            }
+        };
+        ops.b = BSource::Fill(&fill);
+        let mut c2 = vec![f32::NAN; m * n];
+        assert!(product(&ops, &mut c2, bias), "{m} x {n} x {k}");
+        assert_eq!(got, c2.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        (got, chain(&a, &b, m, n, k, bias))
+    }
+
+    #[test]
+    fn products_are_the_fma_chain_bit_for_bit() {
+        if !available() {
+            eprintln!("no AVX-512 here: the native product is not planned on this CPU");
+            return;
+        }
+        // Edges in m (13, 25), n (33, 70), k across blocks (257, 600) and a whole multiple.
+        for (m, n, k) in [
+            (1, 1, 1),
+            (13, 33, 7),
+            (12, 32, 256),
+            (25, 70, 257),
+            (64, 96, 600),
+            (7, 1100, 40),
+            (30, 2100, 520),
+        ] {
+            for per_row in [true, false] {
+                let (got, want) = run(m, n, k, per_row);
+                assert_eq!(got, want, "{m} x {n} x {k}, per row {per_row}");
+            }
+        }
+    }
+
+    #[test]
+    fn threads_split_rows_without_moving_a_bit() {
+        if !available() {
+            return;
+        }
+        let (single, want) = run(100, 70, 300, true);
+        assert_eq!(single, want);
+        let pool = std::sync::Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap(),
+        );
+        let two =
+            tract_linalg::multithread::multithread_tract_scope(Executor::MultiThread(pool), || {
+                run(100, 70, 300, true).0
+            });
+        assert_eq!(two, want);
+    }
+
+    #[test]
+    fn short_operands_are_refused() {
+        let a = PackedA::from_row_major(&[1.0; 12], 3, 4);
+        let b = PackedB::from_row_major(&[1.0; 8], 4, 2);
+        let ops = Operands {
+            a: a.as_slice(),
+            b: BSource::Packed(b.as_slice()),
+            m: 3,
+            n: 2,
+            k: 5,
+        };
+        assert!(!product(&ops, &mut [0.0; 6], Bias::None));
+        let ops = Operands { k: 4, ..ops };
+        assert!(!product(&ops, &mut [0.0; 5], Bias::None));
+        assert!(!product(&ops, &mut [0.0; 6], Bias::PerRow(&[1.0; 2])));
+        // The A panel packer pads rows past `m` with zeros.
+        let mut dst = vec![9.0; MR * 4];
+        pack_a(&[1.0; 12], 3, 4, 4, &mut dst);
+        assert!(dst.iter().filter(|&&v| v == 9.0).count() == 0);
+    }
+}

@@ -1,0 +1,212 @@
+//! The packed operand formats of the native product, and the packing into them.
+//!
+//! A is packed in panels of [`MR`] rows: panel `i` holds, for each `k` ascending, the [`MR`]
+//! values `A[i * MR + r][k]` side by side (zeros past the last row). B is packed in panels of
+//! [`NR`] columns: panel `j` holds, for each `k`, `B[k][j * NR + c]` (zeros past the last
+//! column). A panel is whole in `k`, so a block of `k` is a contiguous slice of it and the
+//! blocking of [`super::product`] needs no format of its own. Every panel starts on a 64-byte
+//! line ([`AlignedBuf`]): the kernel's vector loads never split a cache line.
+
+/// Rows of an A panel (the broadcast side of the kernel).
+pub const MR: usize = 12;
+/// Columns of a B panel (two 16-lane vectors).
+pub const NR: usize = 32;
+
+/// Values per 64-byte line.
+const LINE: usize = 16;
+
+/// An f32 buffer whose first value sits on a 64-byte boundary.
+#[derive(Clone, Debug, Default)]
+pub struct AlignedBuf {
+    raw: Vec<f32>,
+    start: usize,
+    len: usize,
+}
+
+impl AlignedBuf {
+    /// `len` zeros.
+    #[must_use]
+    pub fn zeros(len: usize) -> Self {
+        let raw = vec![0.0f32; len + LINE];
+        let start = raw.as_ptr().align_offset(LINE * size_of::<f32>()).min(LINE);
+        Self { raw, start, len }
+    }
+
+    /// The values.
+    #[must_use]
+    pub fn as_slice(&self) -> &[f32] {
+        &self.raw[self.start..][..self.len]
+    }
+
+    /// The values, writable.
+    pub fn as_mut_slice(&mut self) -> &mut [f32] {
+        &mut self.raw[self.start..][..self.len]
+    }
+
+    /// Bytes held (the allocation, alignment slack included).
+    #[must_use]
+    pub fn bytes(&self) -> usize {
+        self.raw.len() * size_of::<f32>()
+    }
+}
+
+/// Panels of `MR` (or `NR`) needed for `len` rows (columns).
+#[must_use]
+pub const fn panels(len: usize, width: usize) -> usize {
+    len.div_ceil(width)
+}
+
+/// An `m x k` A operand packed once (the constant weights of a convolution).
+#[derive(Clone, Debug)]
+pub struct PackedA {
+    /// Rows.
+    pub m: usize,
+    /// Depth.
+    pub k: usize,
+    buf: AlignedBuf,
+}
+
+impl PackedA {
+    /// Pack the row-major `m x k` matrix `a` (row `r` at `a[r * k..]`).
+    ///
+    /// # Panics
+    /// Never for `a.len() >= m * k`; shorter is a caller bug (checked by the rewrites).
+    #[must_use]
+    pub fn from_row_major(a: &[f32], m: usize, k: usize) -> Self {
+        let mut buf = AlignedBuf::zeros(panels(m, MR) * MR * k);
+        pack_a(a, m, k, k, buf.as_mut_slice());
+        Self { m, k, buf }
+    }
+
+    /// Every panel, one after the other (panel `i` at `i * MR * k`).
+    #[must_use]
+    pub fn as_slice(&self) -> &[f32] {
+        self.buf.as_slice()
+    }
+
+    /// Bytes held.
+    #[must_use]
+    pub fn bytes(&self) -> usize {
+        self.buf.bytes()
+    }
+}
+
+/// A `k x n` B operand packed once (the constant weights of a linear layer).
+#[derive(Clone, Debug)]
+pub struct PackedB {
+    /// Depth.
+    pub k: usize,
+    /// Columns.
+    pub n: usize,
+    buf: AlignedBuf,
+}
+
+impl PackedB {
+    /// Pack the row-major `k x n` matrix `b` (row `kk` at `b[kk * n..]`).
+    #[must_use]
+    pub fn from_row_major(b: &[f32], k: usize, n: usize) -> Self {
+        let mut buf = AlignedBuf::zeros(panels(n, NR) * NR * k);
+        for (kk, row) in b.chunks_exact(n.max(1)).take(k).enumerate() {
+            pack_b_row(row, kk, k, buf.as_mut_slice());
+        }
+        Self { k, n, buf }
+    }
+
+    /// Every panel, one after the other.
+    #[must_use]
+    pub fn as_slice(&self) -> &[f32] {
+        self.buf.as_slice()
+    }
+
+    /// Bytes held.
+    #[must_use]
+    pub fn bytes(&self) -> usize {
+        self.buf.bytes()
+    }
+}
+
+/// Pack the rows of `a` (row `r` of `k` values at `a[r * row_stride..]`) into `dst`, panels of
+/// [`MR`] rows; `dst` holds `panels(m, MR) * MR * k` values, the padding rows already zero or
+/// overwritten here.
+pub fn pack_a(a: &[f32], m: usize, k: usize, row_stride: usize, dst: &mut [f32]) {
+    for (i, panel) in dst.chunks_exact_mut(MR * k).enumerate() {
+        pack_a_panel(a, m, k, row_stride, i, panel);
+    }
+}
+
+/// Panel `i` of [`pack_a`] into `panel` (`MR * k` values).
+pub fn pack_a_panel(a: &[f32], m: usize, k: usize, row_stride: usize, i: usize, panel: &mut [f32]) {
+    for r in 0..MR {
+        let row = i * MR + r;
+        if row < m {
+            let src = &a[row * row_stride..][..k];
+            for (kk, &v) in src.iter().enumerate() {
+                panel[kk * MR + r] = v;
+            }
+        } else {
+            for kk in 0..k {
+                panel[kk * MR + r] = 0.0;
+            }
+        }
+    }
+}
+
+/// Write row `kk` of B (its `n` values in `row`) into the packed buffer `dst` of depth `k`.
+/// The padding columns of the last panel are left as they are (zero in a fresh buffer).
+pub fn pack_b_row(row: &[f32], kk: usize, k: usize, dst: &mut [f32]) {
+    for (j, chunk) in row.chunks(NR).enumerate() {
+        dst[(j * k + kk) * NR..][..chunk.len()].copy_from_slice(chunk);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buffers_start_on_a_line() {
+        for len in [1, 15, 16, 1000] {
+            let b = AlignedBuf::zeros(len);
+            assert_eq!(b.as_slice().as_ptr() as usize % 64, 0);
+            assert_eq!(b.as_slice().len(), len);
+        }
+    }
+
+    #[test]
+    fn a_panels_hold_columns_of_rows_and_zero_padding() {
+        let (m, k) = (14, 3);
+        let a: Vec<f32> = (0..m * k).map(|v| v as f32).collect();
+        let p = PackedA::from_row_major(&a, m, k);
+        // Panel 0, k = 2: rows 0..12 of column 2.
+        let want: Vec<f32> = (0..MR).map(|r| (r * k + 2) as f32).collect();
+        assert_eq!(&p.as_slice()[2 * MR..][..MR], &want[..]);
+        // Panel 1, k = 1: rows 12, 13, then zeros.
+        let p1 = &p.as_slice()[(k + 1) * MR..][..MR];
+        assert_eq!(p1[0], (12 * k + 1) as f32);
+        assert_eq!(p1[1], (13 * k + 1) as f32);
+        assert!(p1[2..].iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn packed_b_matches_its_rows() {
+        let (k, n) = (3, 33);
+        let b: Vec<f32> = (0..k * n).map(|v| v as f32).collect();
+        let p = PackedB::from_row_major(&b, k, n);
+        let mut want = vec![0.0; panels(n, NR) * NR * k];
+        for (kk, row) in b.chunks_exact(n).enumerate() {
+            pack_b_row(row, kk, k, &mut want);
+        }
+        assert_eq!(p.as_slice(), &want[..]);
+    }
+
+    #[test]
+    fn b_rows_land_in_their_panels() {
+        let (k, n) = (2, 40);
+        let mut dst = vec![0.0; panels(n, NR) * NR * k];
+        let row: Vec<f32> = (0..n).map(|v| v as f32 + 100.0).collect();
+        pack_b_row(&row, 1, k, &mut dst);
+        assert_eq!(&dst[NR..2 * NR], &row[..NR]);
+        assert_eq!(&dst[(k + 1) * NR..][..n - NR], &row[NR..]);
+        assert!(dst[..NR].iter().all(|&v| v == 0.0));
+    }
+}

@@ -1,0 +1,386 @@
+//! The linear layers (products with a constant weight matrix) as the native product.
+//!
+//! After decluttering, a linear layer is an [`EinSum`] of an activation `[.., k]` and a
+//! constant `[k, n]` (or `[n, k]`) into `[.., n]`, usually followed by an `Add` of a constant
+//! bias `[n]`. [`native_linears`] rewrites each into one [`PackedLinear`]: the weights packed
+//! once at load ([`gemm::PackedB`]), the activation packed per run, the bias added to the
+//! finished sums, as tract's own plan adds it (bit for bit: this module's tests, against tract's
+//! plan of every stage of the committed default bundle). Rows of fewer than [`MIN_ROWS`]
+//! tokens keep tract's plan: there tract runs its matrix-vector kernels, which sum `k` over four
+//! accumulators, so the bits would differ. On the AVX-512 tier only, as [`gemm`].
+
+use tract_nnef::internal::*;
+use tract_nnef::tract_core::ops::binary::TypedBinOp;
+use tract_nnef::tract_core::ops::einsum::EinSum;
+
+use super::gemm::{self, MR, PackedB};
+
+/// Tokens (rows of the product) from which a linear layer runs natively.
+pub const MIN_ROWS: usize = 8;
+
+/// `x [.., k] . W [k, n] (+ bias [n]) -> [.., n]` with `W` packed at load.
+#[derive(Clone, Debug)]
+pub struct PackedLinear {
+    /// The activation's shape (its last axis `k`).
+    pub input: TVec<usize>,
+    /// Outputs a token.
+    pub n: usize,
+    weights: Arc<PackedB>,
+    bias: Option<Arc<Vec<f32>>>,
+}
+
+impl PartialEq for PackedLinear {
+    fn eq(&self, other: &Self) -> bool {
+        self.input == other.input
+            && self.n == other.n
+            && Arc::ptr_eq(&self.weights, &other.weights)
+            && match (&self.bias, &other.bias) {
+                (None, None) => true,
+                (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+                _ => false,
+            }
+    }
+}
+impl Eq for PackedLinear {}
+
+impl PackedLinear {
+    fn k(&self) -> usize {
+        self.input.last().copied().unwrap_or(0)
+    }
+
+    fn output_shape(&self) -> TVec<usize> {
+        let mut s = self.input.clone();
+        if let Some(last) = s.last_mut() {
+            *last = self.n;
+        }
+        s
+    }
+}
+
+impl Op for PackedLinear {
+    fn name(&self) -> StaticName {
+        "PackedLinear".into()
+    }
+    op_as_typed_op!();
+}
+
+impl EvalOp for PackedLinear {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let x = args_1!(inputs);
+        ensure!(
+            x.shape() == &*self.input,
+            "PackedLinear input {:?}",
+            x.shape()
+        );
+        let px = x.try_as_plain_ram()?;
+        let xs = px.as_slice::<f32>()?;
+        let k = self.k();
+        let m = xs.len() / k.max(1);
+        let mut a = gemm::AlignedBuf::zeros(gemm::panels(m, MR) * MR * k);
+        gemm::on_threads(a.as_mut_slice(), MR * k, |i, panel| {
+            gemm::pack::pack_a_panel(xs, m, k, k, i, panel);
+            true
+        });
+        let mut out = Tensor::zero::<f32>(&self.output_shape())?;
+        let mut po = out.try_as_plain_ram_mut()?;
+        let ops = gemm::Operands {
+            a: a.as_slice(),
+            b: gemm::BSource::Packed(self.weights.as_slice()),
+            m,
+            n: self.n,
+            k,
+        };
+        let bias = match &self.bias {
+            Some(b) => gemm::Bias::PerCol(b),
+            None => gemm::Bias::None,
+        };
+        ensure!(
+            gemm::product(&ops, po.as_slice_mut::<f32>()?, bias),
+            "native product refused (AVX-512 missing or operands mis-sized)"
+        );
+        Ok(tvec!(out.into_tvalue()))
+    }
+}
+
+impl TypedOp for PackedLinear {
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
+        Ok(tvec!(f32::fact(&*self.output_shape())))
+    }
+
+    fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
+        let fma = self.input.iter().product::<usize>() * self.n;
+        Ok(tvec!((Cost::FMA(f32::datum_type()), fma.to_dim())))
+    }
+
+    as_op!();
+}
+
+/// What an [`EinSum`] node is when it is a linear layer.
+struct Layer {
+    /// The activation.
+    x: OutletId,
+    /// Its concrete shape.
+    input: TVec<usize>,
+    /// The weights as `[k, n]`, row-major.
+    w: Tensor,
+    n: usize,
+}
+
+/// The node `id` as a linear layer: an f32 [`EinSum`] of one activation whose last axis is
+/// summed against a constant rank-2 matrix, every other activation axis kept in place, the
+/// matrix's other axis last in the output.
+fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
+    let node = model.node(id);
+    let Some(es) = node.op_as::<EinSum>() else {
+        return Ok(None);
+    };
+    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let facts = model.node_input_facts(id)?;
+    let Some(wi) = (0..2).find(|&i| facts[i].konst.is_some() && facts[i].rank() == 2) else {
+        return Ok(None);
+    };
+    let xi = 1 - wi;
+    let (xf, wf) = (facts[xi], facts[wi]);
+    let Some(input) = xf.shape.as_concrete().map(TVec::from) else {
+        return Ok(None);
+    };
+    if xf.konst.is_some()
+        || xf.datum_type != f32::datum_type()
+        || wf.datum_type != f32::datum_type()
+    {
+        return Ok(None);
+    }
+    let xr = input.len();
+    let (mut k_pos, mut n_pos) = (None, None);
+    for axis in es.axes.iter_all_axes() {
+        let (ix, iw, out) = (&axis.inputs[xi], &axis.inputs[wi], &axis.outputs[0]);
+        if ix.len() > 1 || iw.len() > 1 || out.len() > 1 {
+            return Ok(None);
+        }
+        match (ix.first(), iw.first(), out.first()) {
+            (Some(&px), Some(&pw), None) if px + 1 == xr => k_pos = Some(pw),
+            (None, Some(&pw), Some(&po)) if po + 1 == xr => n_pos = Some(pw),
+            (Some(&px), None, Some(&po)) if px == po && px + 1 < xr => {}
+            _ => return Ok(None),
+        }
+    }
+    let (Some(k_pos), Some(_)) = (k_pos, n_pos) else {
+        return Ok(None);
+    };
+    let Some(konst) = wf.konst.as_ref() else {
+        return Ok(None);
+    };
+    let w = if k_pos == 0 {
+        konst.clone().into_tensor()
+    } else {
+        konst.clone().into_tensor().permute_axes(&[1, 0])?
+    };
+    let n = w.shape()[1];
+    Ok(Some(Layer {
+        x: node.inputs[xi],
+        input,
+        w,
+        n,
+    }))
+}
+
+/// The constant bias `[n]` (any rank, ones before the last axis) that the single `Add`
+/// successor of `id` adds, with that node.
+fn bias_after(model: &TypedModel, id: usize, n: usize) -> TractResult<Option<(usize, Vec<f32>)>> {
+    let outlet = &model.node(id).outputs[0];
+    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
+        return Ok(None);
+    }
+    let add_id = outlet.successors[0].node;
+    let add = model.node(add_id);
+    let is_add = add
+        .op_as::<TypedBinOp>()
+        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
+    if !is_add || add.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let other = if add.inputs[0].node == id { 1 } else { 0 };
+    let facts = model.node_input_facts(add_id)?;
+    let Some(b) = facts[other].konst.as_ref() else {
+        return Ok(None);
+    };
+    let out_rank = facts[1 - other].rank();
+    let shape = b.shape();
+    let bias_like = b.datum_type() == f32::datum_type()
+        && shape.len() <= out_rank
+        && shape.last() == Some(&n)
+        && shape[..shape.len() - 1].iter().all(|&d| d == 1);
+    if !bias_like || model.outlet_fact(OutletId::new(add_id, 0))?.shape != facts[1 - other].shape {
+        return Ok(None);
+    }
+    let plain = b.try_as_plain_ram()?;
+    Ok(Some((add_id, plain.as_slice::<f32>()?.to_vec())))
+}
+
+/// Rewrite every linear layer of a decluttered `model` with at least [`MIN_ROWS`] tokens and
+/// at least two outputs into a [`PackedLinear`], its bias `Add` taken in; returns the model and
+/// the number rewritten.
+///
+/// # Errors
+/// tract refusing a patch (an inconsistent model).
+pub fn native_linears(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
+    let mut done = 0;
+    for id in model.eval_order()? {
+        let Some(layer) = as_layer(&model, id)? else {
+            continue;
+        };
+        let k = *layer.input.last().unwrap_or(&0);
+        let rows = layer.input.iter().product::<usize>() / k.max(1);
+        if rows < MIN_ROWS || layer.n < 2 || k == 0 {
+            continue;
+        }
+        let bias = bias_after(&model, id, layer.n)?;
+        let w_plain = layer.w.try_as_plain_ram()?;
+        let op = PackedLinear {
+            input: layer.input.clone(),
+            n: layer.n,
+            weights: Arc::new(PackedB::from_row_major(
+                w_plain.as_slice::<f32>()?,
+                k,
+                layer.n,
+            )),
+            bias: bias.as_ref().map(|(_, b)| Arc::new(b.clone())),
+        };
+        let replaced = bias.map_or(id, |(add_id, _)| add_id);
+        let name = model.node(id).name.clone();
+        let mut patch = TypedModelPatch::default();
+        let x = patch.tap_model(&model, layer.x)?;
+        let y = patch.wire_node(format!("{name}.packed_linear"), op, &[x])?[0];
+        patch.shunt_outside(&model, OutletId::new(replaced, 0), y)?;
+        patch.apply(&mut model)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The pass against tract's own plan, bit for bit: on linear layers built here (weights
+    //! either way round, with and without a bias, one and two leading axes) and on every stage
+    //! of the committed default bundle.
+    use super::*;
+    use crate::engine::Stage;
+    use crate::engine_tract::rewrite::Pass;
+    use crate::engine_tract::test_support::{
+        assert_same_bits, bits, committed_stage_before, inputs_of, run_optimized,
+    };
+    use tract_nnef::tract_core::ops::math;
+
+    /// `x [lead.., k] . W (+ b)`, W stored `[k, n]` or (transposed) `[n, k]`.
+    fn layer_model(lead: &[usize], k: usize, n: usize, transposed: bool, bias: bool) -> TypedModel {
+        let values = |len: usize, seed: usize| -> Vec<f32> {
+            (0..len)
+                .map(|i| ((i * 7919 + seed * 104_729) % 1013) as f32 / 500.0 - 1.0)
+                .collect()
+        };
+        let mut model = TypedModel::default();
+        let mut shape: Vec<usize> = lead.to_vec();
+        shape.push(k);
+        let x = model.add_source("x", f32::fact(&shape)).unwrap();
+        let (w_shape, w_axes) = if transposed {
+            ([n, k], "nk")
+        } else {
+            ([k, n], "kn")
+        };
+        let w = Tensor::from_shape(&w_shape, &values(k * n, 1)).unwrap();
+        let w = model.add_const("w", w).unwrap();
+        let lead_axes: String = "abc".chars().take(lead.len()).collect();
+        let expr = format!("{lead_axes}k,{w_axes}->{lead_axes}n");
+        let es = EinSum {
+            axes: expr.parse().unwrap(),
+            operating_dt: f32::datum_type(),
+            q_params: None,
+        };
+        let mut y = model.wire_node("mm", es, &[x, w]).unwrap()[0];
+        if bias {
+            let mut b_shape = vec![1; lead.len()];
+            b_shape.push(n);
+            let b = Tensor::from_shape(&b_shape, &values(n, 2)).unwrap();
+            let b = model.add_const("b", b).unwrap();
+            y = model.wire_node("add", math::add(), &[y, b]).unwrap()[0];
+        }
+        model.select_output_outlets(&[y]).unwrap();
+        model.into_decluttered().unwrap()
+    }
+
+    #[test]
+    fn linear_layers_run_natively_with_tracts_bits() {
+        if !gemm::available() {
+            eprintln!("no AVX-512 here: the pass does not run on this CPU");
+            return;
+        }
+        for (lead, k, n, transposed, bias) in [
+            (vec![3200], 256, 256, false, true),
+            (vec![1, 2000], 64, 130, true, true),
+            (vec![4, 50], 300, 33, false, false),
+            (vec![9], 7, 2, true, false),
+        ] {
+            let model = layer_model(&lead, k, n, transposed, bias);
+            let (native, done) = native_linears(model.clone()).unwrap();
+            assert_eq!(done, 1, "{lead:?} x {k} -> {n}");
+            assert!(native.nodes().iter().any(|n| n.op_is::<PackedLinear>()));
+            // The bias add went into the op.
+            let adds = native
+                .eval_order()
+                .unwrap()
+                .into_iter()
+                .filter(|&i| native.node(i).op_is::<TypedBinOp>())
+                .count();
+            assert_eq!(adds, 0, "{lead:?} x {k} -> {n}");
+            let mut shape = lead.clone();
+            shape.push(k);
+            let len: usize = shape.iter().product();
+            let x: Vec<f32> = (0..len)
+                .map(|i| ((i * 31) % 97) as f32 / 48.0 - 1.0)
+                .collect();
+            let inputs = tvec![Tensor::from_shape(&shape, &x).unwrap().into_tvalue()];
+            let want = run_optimized(model, &inputs);
+            let got = run_optimized(native, &inputs);
+            assert_eq!(got[0].shape(), want[0].shape());
+            assert_eq!(bits(&got[0]), bits(&want[0]), "{lead:?} x {k} -> {n}");
+        }
+    }
+
+    #[test]
+    fn single_tokens_keep_tracts_plan() {
+        // One token: tract's matrix-vector kernels sum k in another order.
+        let model = layer_model(&[1], 64, 64, false, true);
+        assert_eq!(native_linears(model).unwrap().1, 0);
+    }
+
+    #[test]
+    fn a_wrong_input_is_an_error_value() {
+        let op = PackedLinear {
+            input: tvec![4, 3],
+            n: 2,
+            weights: Arc::new(PackedB::from_row_major(&[1.0; 6], 3, 2)),
+            bias: None,
+        };
+        let x = Tensor::zero::<f32>(&[4, 2]).unwrap();
+        assert!(op.eval_out_of_plan(tvec!(x.into_tvalue())).is_err());
+    }
+
+    #[test]
+    fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
+        for stage in Stage::ALL {
+            let plain = committed_stage_before(stage, Pass::NativeLinears);
+            let inputs = inputs_of(&plain);
+            let (native, _) = native_linears(plain.clone()).expect("rewrite");
+            let (a, b) = (
+                run_optimized(plain, &inputs),
+                run_optimized(native, &inputs),
+            );
+            assert_same_bits(stage, &a, &b);
+        }
+    }
+}
