@@ -1,14 +1,15 @@
-//! Minimal reproduction of the tract 0.23.9 limitations behind our convolution stages
-//! (docs/perf.md): the f32 3x3 convolutions of `nano`, each run as a tract `Conv` (tract's own
-//! choice of path: lazy im2col for all of these), as a `Conv` planned with eager im2col
-//! (tract's knobs scoped to the plan, what `engine_tract::conv_im2col` does for the wide ones
-//! on the AVX-512 tier), as tract's matrix product alone on the same GEMM (the im2col operand
-//! given, `[m, k] x [k, n]`, m = output channels, k = 9 x input channels, n = output pixels)
-//! and as the same GEMM through matrixmultiply (ndarray's pure-Rust kernel, AVX2 + FMA, no
-//! AVX-512), and, on an AVX-512 CPU, through the engine's own product (`native_unfold_conv`:
-//! `engine_tract::conv_unfold`, patches packed as gathered, `engine_tract::gemm`). FLOPs per call are `2 m k n` (criterion's "elements"); the group names carry the
-//! shape. The `gemm` crate's columns of docs/perf.md were measured with this file at commit
-//! 7174941.
+//! Minimal reproduction of the tract 0.23.9 limitations behind our convolution stages, and what
+//! the engine runs instead (docs/perf.md): the f32 3x3 convolutions of `nano`, each run as a
+//! tract `Conv` (tract's own choice of path: lazy im2col for all of these), as a `Conv` planned
+//! with eager im2col (tract's knobs scoped to the plan), as tract's matrix product alone on the
+//! same GEMM (the im2col operand given, `[m, k] x [k, n]`, m = output channels, k = 9 x input
+//! channels, n = output pixels), as the same GEMM through matrixmultiply (ndarray's pure-Rust
+//! kernel, AVX2 + FMA, no AVX-512), and, on an AVX-512 CPU, through the engine's own product:
+//! the whole convolution as the engine plans it (`native_unfold_conv`:
+//! `engine_tract::conv_unfold`, patches gathered into the packed blocks) and the product alone
+//! on operands packed beforehand (`native_gemm_packed`: `engine_tract::gemm`). FLOPs per call
+//! are `2 m k n` (criterion's "elements"); the group names carry the shape. The `gemm` crate's
+//! columns of docs/perf.md were measured with this file at commit 7174941.
 //!
 //! Run: `cargo bench --workspace --exclude satmap-nostd-check --bench tract_conv --profile test`.
 

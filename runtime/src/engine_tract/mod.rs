@@ -24,7 +24,6 @@ use tract_linalg::multithread::{Executor, multithread_tract_scope};
 pub mod bilinear;
 pub mod broadcast;
 pub mod conv_direct;
-pub mod conv_im2col;
 pub mod conv_unfold;
 pub mod fold;
 pub mod gemm;

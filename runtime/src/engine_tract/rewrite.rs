@@ -4,10 +4,10 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]), on the AVX-512 kernel tier the wide convolutions, planned with
-//! eager im2col ([`conv_im2col`]), and the mid-width ones, unfolded natively for tract's matmul
-//! ([`conv_unfold`]), and the wide image stems, planned with im2col where tract
-//! would run them direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
+//! softmaxes ([`softmax`]), on the AVX-512 kernel tier the convolutions of 64 channels or more
+//! ([`conv_unfold`]) and the linear layers ([`linear`]) on the native product ([`gemm`]), and
+//! (on the other tiers) the wide image stems, planned with im2col where tract would run them
+//! direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
 //! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
 //! nothing), and the constants re-laid with natural strides ([`natural_consts`]). Every rewrite but
@@ -17,8 +17,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    bilinear, broadcast, conv_direct, conv_im2col, conv_unfold, fold, linear, natural_consts,
-    softmax, weighted_sum,
+    bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear, natural_consts, softmax,
+    weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -34,9 +34,6 @@ pub struct Rewrites {
     /// Softmaxes run as [`softmax::RowSoftmax`] (0 on a host whose softmax kernel it does not
     /// model).
     pub row_softmaxes: usize,
-    /// Wide convolutions planned with eager im2col ([`conv_im2col::eager_wide_convs`]; 0 where
-    /// it does not pay off, [`conv_im2col::pays_off`]).
-    pub eager_im2col_convs: usize,
     /// Convolutions of 64 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
     pub unfolded_convs: usize,
@@ -61,7 +58,6 @@ pub(crate) enum Pass {
     BilinearSamplers,
     RowSoftmaxes,
     UnfoldConvs,
-    EagerIm2col,
     NativeLinears,
     Im2colStems,
     Fold,
@@ -92,15 +88,12 @@ pub(crate) fn optimise_before(
     if runs(Pass::RowSoftmaxes) {
         (model, done.row_softmaxes) = softmax::fuse_softmaxes(model)?;
     }
-    // The two convolution plans measured faster on the AVX-512 kernel tier only.
-    let avx512_convs = conv_im2col::pays_off(crate::engine_tract::kernel_family());
-    if runs(Pass::UnfoldConvs) && avx512_convs {
+    // The native product has an AVX-512 kernel only; elsewhere tract's products stay.
+    let native = gemm::available();
+    if runs(Pass::UnfoldConvs) && native {
         (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
     }
-    if runs(Pass::EagerIm2col) && avx512_convs {
-        (model, done.eager_im2col_convs) = conv_im2col::eager_wide_convs(model)?;
-    }
-    if runs(Pass::NativeLinears) && avx512_convs {
+    if runs(Pass::NativeLinears) && native {
         (model, done.native_linears) = linear::native_linears(model)?;
     }
     if runs(Pass::Im2colStems) {
