@@ -112,6 +112,8 @@ pub struct UnfoldConv {
     pub unfold: Unfold,
     /// Output channels.
     pub out_channels: usize,
+    /// Whether input and output carry a batch axis of 1 (NCHW; CHW otherwise).
+    pub batch_axis: bool,
     weights: Arc<PackedA>,
     bias: Arc<Vec<f32>>,
 }
@@ -120,6 +122,7 @@ impl PartialEq for UnfoldConv {
     fn eq(&self, other: &Self) -> bool {
         self.unfold == other.unfold
             && self.out_channels == other.out_channels
+            && self.batch_axis == other.batch_axis
             && Arc::ptr_eq(&self.weights, &other.weights)
             && Arc::ptr_eq(&self.bias, &other.bias)
     }
@@ -133,23 +136,44 @@ impl Op for UnfoldConv {
     op_as_typed_op!();
 }
 
+impl UnfoldConv {
+    /// `[1, C, H, W]` or `[C, H, W]`.
+    fn input_shape(&self) -> TVec<usize> {
+        let [c, h, w] = self.unfold.input;
+        self.with_batch([c, h, w])
+    }
+
+    /// `[1, C_out, OH, OW]` or `[C_out, OH, OW]`.
+    fn output_shape(&self) -> TVec<usize> {
+        let [oh, ow] = self.unfold.output;
+        self.with_batch([self.out_channels, oh, ow])
+    }
+
+    fn with_batch(&self, chw: [usize; 3]) -> TVec<usize> {
+        let mut s: TVec<usize> = if self.batch_axis { tvec![1] } else { tvec![] };
+        s.extend(chw);
+        s
+    }
+}
+
 impl EvalOp for UnfoldConv {
     op_out_of_plan!();
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         let x = args_1!(inputs);
-        let [c_n, h, w] = self.unfold.input;
+        let [c_n, _, _] = self.unfold.input;
         let [kh, kw] = self.unfold.kernel;
         let [oh, ow] = self.unfold.output;
         ensure!(
-            x.shape() == [1, c_n, h, w],
-            "UnfoldConv input {:?}",
-            x.shape()
+            x.shape() == &*self.input_shape(),
+            "UnfoldConv input {:?}, expected {:?}",
+            x.shape(),
+            self.input_shape()
         );
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let co = self.out_channels;
-        let mut out = Tensor::zero::<f32>(&[1, co, oh, ow])?;
+        let mut out = Tensor::zero::<f32>(&self.output_shape())?;
         let mut po = out.try_as_plain_ram_mut()?;
         let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
             self.unfold.fill_panels(xs, (j, pc, kc), dst);
@@ -176,8 +200,7 @@ impl EvalOp for UnfoldConv {
 impl TypedOp for UnfoldConv {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
         ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        let [oh, ow] = self.unfold.output;
-        Ok(tvec!(f32::fact([1, self.out_channels, oh, ow])))
+        Ok(tvec!(f32::fact(&*self.output_shape())))
     }
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
@@ -196,7 +219,7 @@ impl TypedOp for UnfoldConv {
 pub const MIN_OUTPUT_CHANNELS: usize = 64;
 
 /// Rewrite every f32 convolution of a decluttered `model` with one group, NCHW over two
-/// spatial axes, batch 1, constant weights and bias and at least [`MIN_OUTPUT_CHANNELS`]
+/// spatial axes (or CHW, the batch axis decluttered away), batch 1, constant weights and bias and at least [`MIN_OUTPUT_CHANNELS`]
 /// outputs into an [`UnfoldConv`]; returns the model and the number rewritten.
 ///
 /// # Errors
@@ -212,7 +235,10 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         };
         if conv.q_params.is_some()
             || conv.group != 1
-            || conv.pool_spec.data_format != DataFormat::NCHW
+            || !matches!(
+                conv.pool_spec.data_format,
+                DataFormat::NCHW | DataFormat::CHW
+            )
             || conv.pool_spec.kernel_shape.len() != 2
             || conv.output_channels() < MIN_OUTPUT_CHANNELS
         {
@@ -228,10 +254,12 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         let (Some(kernel), Some(bias)) = (facts[1].konst.clone(), facts[2].konst.clone()) else {
             continue;
         };
-        if xs.len() != 4 || xs[0] != 1 {
-            continue;
-        }
-        let (ci, h, w) = (xs[1], xs[2], xs[3]);
+        let batch_axis = conv.pool_spec.data_format == DataFormat::NCHW;
+        let (ci, h, w) = match *xs {
+            [1, c, h, w] if batch_axis => (c, h, w),
+            [c, h, w] if !batch_axis => (c, h, w),
+            _ => continue,
+        };
         let co = conv.output_channels();
         let ks = &conv.pool_spec.kernel_shape;
         let (kh, kw) = (ks[0], ks[1]);
@@ -268,6 +296,7 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         let op = UnfoldConv {
             unfold,
             out_channels: co,
+            batch_axis,
             weights: Arc::new(weights),
             bias: Arc::new(bias_vals),
         };
@@ -303,7 +332,8 @@ mod tests {
         let cases = [
             // `nano`'s layer1 (64 -> 64 over 48 x 80), a layer2 entry (stride 2), the stem
             // (7x7, stride 2, padding 3), a dilated one, odd maps that leave border pixels,
-            // and layer3 and layer4 widths (a 1x1 convolution is a matmul after decluttering).
+            // layer3 and layer4 widths (a 1x1 convolution is a matmul after decluttering), and
+            // a satellite FPN convolution and patch embedding without the batch axis.
             ConvShape::new(64, 64, [48, 80], 3, 1, 1),
             ConvShape::new(64, 128, [48, 80], 3, 2, 1),
             ConvShape::new(3, 64, [96, 160], 7, 2, 3),
@@ -314,6 +344,14 @@ mod tests {
             ConvShape::new(16, 96, [11, 9], 3, 2, 0),
             ConvShape::new(128, 256, [12, 20], 3, 1, 1),
             ConvShape::new(300, 512, [6, 10], 3, 1, 1),
+            ConvShape {
+                batch: false,
+                ..ConvShape::new(256, 256, [25, 13], 3, 1, 1)
+            },
+            ConvShape {
+                batch: false,
+                ..ConvShape::new(3, 96, [40, 24], 4, 4, 0)
+            },
         ];
         for s in cases {
             let (model, inputs) = conv_model(&s);
@@ -349,6 +387,7 @@ mod tests {
         let op = UnfoldConv {
             unfold,
             out_channels: 1,
+            batch_axis: true,
             weights: Arc::new(PackedA::from_row_major(&[0.5; 18], 1, 18)),
             bias: Arc::new(vec![0.0]),
         };

@@ -172,7 +172,8 @@ pub(crate) fn run_optimized(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TV
 }
 
 /// One 2-D convolution for the convolution passes' tests: channels in and out, input map,
-/// square kernel, stride, padding each side, dilation.
+/// square kernel, stride, padding each side, dilation, and whether the input has a batch axis
+/// (NCHW) or not (CHW, as tract declutters some).
 pub(crate) struct ConvShape {
     pub ci: usize,
     pub co: usize,
@@ -181,6 +182,7 @@ pub(crate) struct ConvShape {
     pub stride: usize,
     pub pad: usize,
     pub dilation: usize,
+    pub batch: bool,
 }
 
 impl ConvShape {
@@ -201,6 +203,7 @@ impl ConvShape {
             stride,
             pad,
             dilation: 1,
+            batch: true,
         }
     }
 }
@@ -219,7 +222,12 @@ pub(crate) fn conv_model(s: &ConvShape) -> (TypedModel, TVec<TValue>) {
     use tract_nnef::tract_core::ops::nn::DataFormat;
     let [h, w] = s.hw;
     let mut model = TypedModel::default();
-    let x = model.add_source("x", f32::fact([1, s.ci, h, w])).unwrap();
+    let shape: Vec<usize> = if s.batch {
+        vec![1, s.ci, h, w]
+    } else {
+        vec![s.ci, h, w]
+    };
+    let x = model.add_source("x", f32::fact(&shape)).unwrap();
     let weights = Tensor::from_shape(
         &[s.co, s.ci, s.k, s.k],
         &conv_values(s.co * s.ci * s.k * s.k, 1),
@@ -230,7 +238,11 @@ pub(crate) fn conv_model(s: &ConvShape) -> (TypedModel, TVec<TValue>) {
     let bias = model.add_const("b", bias).unwrap();
     let conv = Conv {
         pool_spec: PoolSpec {
-            data_format: DataFormat::NCHW,
+            data_format: if s.batch {
+                DataFormat::NCHW
+            } else {
+                DataFormat::CHW
+            },
             kernel_shape: tvec!(s.k, s.k),
             padding: PaddingSpec::Explicit(tvec!(s.pad, s.pad), tvec!(s.pad, s.pad)),
             dilations: Some(tvec!(s.dilation, s.dilation)),
@@ -244,6 +256,6 @@ pub(crate) fn conv_model(s: &ConvShape) -> (TypedModel, TVec<TValue>) {
     };
     let y = model.wire_node("conv", conv, &[x, kernel, bias]).unwrap();
     model.select_output_outlets(&y).unwrap();
-    let input = Tensor::from_shape(&[1, s.ci, h, w], &conv_values(s.ci * h * w, 3)).unwrap();
+    let input = Tensor::from_shape(&shape, &conv_values(s.ci * h * w, 3)).unwrap();
     (model.into_decluttered().unwrap(), tvec![input.into()])
 }
