@@ -78,26 +78,30 @@ impl EvalOp for PackedLinear {
         let xs = px.as_slice::<f32>()?;
         let k = self.k();
         let m = xs.len() / k.max(1);
-        let mut a = gemm::AlignedBuf::zeros(gemm::panels(m, MR) * MR * k);
-        gemm::on_threads(a.as_mut_slice(), MR * k, |i, panel| {
-            gemm::pack::pack_a_panel(xs, m, k, k, i, panel);
-            true
-        });
         let mut out = Tensor::zero::<f32>(&self.output_shape())?;
         let mut po = out.try_as_plain_ram_mut()?;
-        let ops = gemm::Operands {
-            a: a.as_slice(),
-            b: gemm::BSource::Packed(self.weights.as_slice()),
-            m,
-            n: self.n,
-            k,
-        };
+        let c = po.as_slice_mut::<f32>()?;
         let bias = match &self.bias {
             Some(b) => gemm::Bias::PerCol(b),
             None => gemm::Bias::None,
         };
+        let n = self.n;
+        let done = gemm::pack::with_scratch(gemm::panels(m, MR) * MR * k, |a| {
+            gemm::on_threads(a, MR * k, |i, panel| {
+                gemm::pack::pack_a_panel(xs, m, k, k, i, panel);
+                true
+            });
+            let ops = gemm::Operands {
+                a,
+                b: gemm::BSource::Packed(self.weights.as_slice()),
+                m,
+                n,
+                k,
+            };
+            gemm::product(&ops, c, bias)
+        });
         ensure!(
-            gemm::product(&ops, po.as_slice_mut::<f32>()?, bias),
+            done,
             "native product refused (AVX-512 missing or operands mis-sized)"
         );
         Ok(tvec!(out.into_tvalue()))

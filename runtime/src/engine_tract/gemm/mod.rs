@@ -108,10 +108,17 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
         }
         return true;
     }
-    let mut scratch = match b {
-        BSource::Fill(_) => AlignedBuf::zeros(NC_PANELS.min(n_panels) * KC.min(k) * NR),
-        BSource::Packed(_) => AlignedBuf::zeros(0),
+    let scratch_len = match b {
+        BSource::Fill(_) => NC_PANELS.min(n_panels) * KC.min(k) * NR,
+        BSource::Packed(_) => 0,
     };
+    pack::with_scratch(scratch_len, |scratch| blocks(ops, c, bias, scratch))
+}
+
+/// [`product`]'s blocks, B's filled into `scratch` where it is filled.
+fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]) -> bool {
+    let Operands { a, b, m, n, k } = *ops;
+    let n_panels = panels(n, NR);
     let rows_per_task = MR * panels(m, MR).div_ceil(2 * threads()).max(1);
     for jc in (0..n_panels).step_by(NC_PANELS) {
         let js = jc..(jc + NC_PANELS).min(n_panels);
@@ -124,7 +131,7 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
                 b: match b {
                     BSource::Packed(all) => BlockB::Whole(all, k),
                     BSource::Fill(fill) => {
-                        let dst = &mut scratch.as_mut_slice()[..js.len() * kc * NR];
+                        let dst = &mut scratch[..js.len() * kc * NR];
                         let filled = on_threads(dst, FILL_PANELS * kc * NR, |t, panels| {
                             fill(jc + t * FILL_PANELS, pc, kc, panels);
                             true

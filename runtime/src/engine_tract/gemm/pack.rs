@@ -50,6 +50,24 @@ impl AlignedBuf {
     }
 }
 
+std::thread_local! {
+    /// Scratch buffers of this thread, kept between products: a fresh buffer of a few MiB is a
+    /// fresh mapping whose first touch page-faults on every run.
+    static SCRATCH: std::cell::RefCell<Vec<AlignedBuf>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// `f` over a scratch of `len` values whose contents are unspecified (the caller writes every
+/// value it reads), reused across calls on this thread; nested calls get distinct buffers.
+pub fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32]) -> R) -> R {
+    let mut buf = SCRATCH
+        .with(|s| s.borrow_mut().pop())
+        .filter(|b| b.len >= len)
+        .unwrap_or_else(|| AlignedBuf::zeros(len));
+    let out = f(&mut buf.as_mut_slice()[..len]);
+    SCRATCH.with(|s| s.borrow_mut().push(buf));
+    out
+}
+
 /// Panels of `MR` (or `NR`) needed for `len` rows (columns).
 #[must_use]
 pub const fn panels(len: usize, width: usize) -> usize {
@@ -162,6 +180,22 @@ pub fn pack_b_row(row: &[f32], kk: usize, k: usize, dst: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scratch_is_reused_and_nested_calls_get_their_own() {
+        let first = with_scratch(100, |s| s.as_ptr() as usize);
+        let (again, inner) = with_scratch(50, |outer| {
+            outer.fill(1.0);
+            let inner = with_scratch(50, |inner| {
+                inner.fill(2.0);
+                inner.as_ptr() as usize
+            });
+            assert!(outer.iter().all(|&v| v == 1.0));
+            (outer.as_ptr() as usize, inner)
+        });
+        assert_eq!(first, again);
+        assert_ne!(again, inner);
+    }
 
     #[test]
     fn buffers_start_on_a_line() {
