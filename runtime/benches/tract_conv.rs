@@ -149,6 +149,7 @@ fn bench(crit: &mut Criterion) {
                         m,
                         n,
                         k,
+                        ldc: n,
                     };
                     assert!(gemm::product(&ops, black_box(&mut c), gemm::Bias::None));
                 })

@@ -184,6 +184,7 @@ impl EvalOp for UnfoldConv {
             m: co,
             n: oh * ow,
             k: c_n * kh * kw,
+            ldc: oh * ow,
         };
         ensure!(
             gemm::product(

@@ -87,7 +87,7 @@ impl EvalOp for PackedLinear {
         };
         let n = self.n;
         let done = gemm::pack::with_scratch(gemm::panels(m, MR) * MR * k, |a| {
-            gemm::on_threads(a, MR * k, |i, panel| {
+            gemm::on_threads(gemm::worth_threads(m * k * n), a, MR * k, |i, panel| {
                 gemm::pack::pack_a_panel(xs, m, k, k, i, panel);
                 true
             });
@@ -97,6 +97,7 @@ impl EvalOp for PackedLinear {
                 m,
                 n,
                 k,
+                ldc: n,
             };
             gemm::product(&ops, c, bias)
         });

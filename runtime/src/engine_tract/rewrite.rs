@@ -17,8 +17,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear, natural_consts, softmax,
-    weighted_sum,
+    batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear, natural_consts,
+    softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -40,6 +40,9 @@ pub struct Rewrites {
     /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on the
     /// AVX-512 tier only).
     pub native_linears: usize,
+    /// Products of two activations (attention) run as [`batched::BatchedProduct`]
+    /// ([`batched::native_batched`]; on the AVX-512 tier only).
+    pub native_batched: usize,
     /// Convolutions tract would run direct spatial planned with im2col and its matmul instead
     /// ([`conv_direct::im2col_wide_stems`]: the image stems of 64 channels or more).
     pub im2col_stems: usize,
@@ -59,6 +62,7 @@ pub(crate) enum Pass {
     RowSoftmaxes,
     UnfoldConvs,
     NativeLinears,
+    NativeBatched,
     Im2colStems,
     Fold,
     BroadcastBinaries,
@@ -95,6 +99,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::NativeLinears) && native {
         (model, done.native_linears) = linear::native_linears(model)?;
+    }
+    if runs(Pass::NativeBatched) && native {
+        (model, done.native_batched) = batched::native_batched(model)?;
     }
     if runs(Pass::Im2colStems) {
         (model, done.im2col_stems) = conv_direct::im2col_wide_stems(model)?;

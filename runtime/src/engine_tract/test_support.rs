@@ -82,9 +82,13 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // bev_query's value/offset/weight/output projections, bev_encoder's, the Swin blocks' and
     // the decoder's (per stage, `Stage::ALL` order).
     let linears = if avx512 { [1, 6, 3, 18, 19] } else { [0; 5] };
+    // Products of two activations: the Swin windows' attention where a window has 8 tokens or
+    // more, the decoder's live self-attention (scores and weighted values).
+    let batched = if avx512 { [0, 0, 0, 4, 2] } else { [0; 5] };
     let none = Rewrites {
         broadcast_binaries: broadcast[stage as usize],
         native_linears: linears[stage as usize],
+        native_batched: batched[stage as usize],
         ..Rewrites::default()
     };
     match stage {

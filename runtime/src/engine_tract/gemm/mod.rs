@@ -70,15 +70,30 @@ pub struct Operands<'a> {
     pub n: usize,
     /// Depth.
     pub k: usize,
+    /// C's row stride (`n` for a dense C).
+    pub ldc: usize,
 }
 
-/// The product into `c` (row-major `m x n`) on the engine's threads: the blocks of B filled
+impl Operands<'_> {
+    /// Values C spans: `m` rows of `n` at `ldc` apart.
+    #[must_use]
+    pub fn c_len(&self) -> usize {
+        if self.m == 0 {
+            0
+        } else {
+            (self.m - 1) * self.ldc + self.n
+        }
+    }
+}
+
+/// The product into `c` (`m` rows of `n` values, row `r` at `r * ldc`, [`Operands::c_len`]
+/// long; the values between rows untouched) on the engine's threads: the blocks of B filled
 /// panel by panel, then the rows of C in whole A panels. `false` (C in an unspecified state)
 /// for operands or a bias shorter than their sizes, or a CPU without AVX-512: the rewrites that
 /// plan this product check both, so that is a bug, never input.
 #[must_use]
 pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
-    let Operands { a, b, m, n, k } = *ops;
+    let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
     let sized = a.len() >= panels(m, MR) * MR * k
         && match b {
@@ -90,15 +105,15 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
             Bias::PerRow(v) => v.len() >= m,
             Bias::PerCol(v) => v.len() >= n,
         };
-    if !sized || c.len() != m * n || !available() {
+    if !sized || ldc < n || c.len() != ops.c_len() || !available() {
         return false;
     }
     if m == 0 || n == 0 {
         return true;
     }
     if k == 0 {
-        for (r, row) in c.chunks_exact_mut(n).enumerate() {
-            for (col, v) in row.iter_mut().enumerate() {
+        for (r, row) in c.chunks_mut(ldc).enumerate() {
+            for (col, v) in row[..n].iter_mut().enumerate() {
                 *v = match bias {
                     Bias::None => 0.0,
                     Bias::PerRow(b) => 0.0 + b[r],
@@ -117,8 +132,9 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
 
 /// [`product`]'s blocks, B's filled into `scratch` where it is filled.
 fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]) -> bool {
-    let Operands { a, b, m, n, k } = *ops;
+    let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
+    let parallel = worth_threads(m * n * k);
     let rows_per_task = MR * panels(m, MR).div_ceil(2 * threads()).max(1);
     for jc in (0..n_panels).step_by(NC_PANELS) {
         let js = jc..(jc + NC_PANELS).min(n_panels);
@@ -132,10 +148,11 @@ fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]
                     BSource::Packed(all) => BlockB::Whole(all, k),
                     BSource::Fill(fill) => {
                         let dst = &mut scratch[..js.len() * kc * NR];
-                        let filled = on_threads(dst, FILL_PANELS * kc * NR, |t, panels| {
-                            fill(jc + t * FILL_PANELS, pc, kc, panels);
-                            true
-                        });
+                        let filled =
+                            on_threads(parallel, dst, FILL_PANELS * kc * NR, |t, panels| {
+                                fill(jc + t * FILL_PANELS, pc, kc, panels);
+                                true
+                            });
                         if !filled {
                             return false;
                         }
@@ -143,8 +160,8 @@ fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]
                     }
                 },
             };
-            let done = on_threads(&mut c[..], rows_per_task * n, |t, rows| {
-                block.tiles(a, (t * rows_per_task / MR, rows), (n, k), bias)
+            let done = on_threads(parallel, &mut c[..], rows_per_task * ldc, |t, rows| {
+                block.tiles(a, (t * rows_per_task / MR, rows), (n, k, ldc), bias)
             });
             if !done {
                 return false;
@@ -171,17 +188,18 @@ enum BlockB<'a> {
 }
 
 impl Block<'_> {
-    /// The block's tiles over the rows of C from A panel `first` (`rows`: whole rows of C).
+    /// The block's tiles over the rows of C from A panel `first` (`rows`: the rows of C at
+    /// `ldc` apart, the last one `n` long at least).
     fn tiles(
         &self,
         a: &[f32],
         (first, rows): (usize, &mut [f32]),
-        (n, k): (usize, usize),
+        (n, k, ldc): (usize, usize, usize),
         bias: Bias<'_>,
     ) -> bool {
         let Self { pc, kc, .. } = *self;
         let last = pc + kc == k;
-        let rows_here = rows.len() / n;
+        let rows_here = (rows.len() + ldc - n) / ldc;
         for ii in 0..rows_here.div_ceil(MR) {
             let i = first + ii;
             let a_blk = &a[(i * k + pc) * MR..][..kc * MR];
@@ -199,8 +217,8 @@ impl Block<'_> {
                 let done = kernel::run(kernel::Tile {
                     a: a_blk,
                     b: b_blk,
-                    c: &mut rows[ii * MR * n + j * NR..],
-                    ldc: n,
+                    c: &mut rows[ii * MR * ldc + j * NR..],
+                    ldc,
                     rows: MR.min(rows_here - ii * MR),
                     cols: NR.min(n - j * NR),
                     accumulate: pc > 0,
@@ -223,15 +241,25 @@ fn threads() -> usize {
     }
 }
 
-/// `task(index, chunk)` over `data` in chunks of `chunk` values, on the engine's pool; `false`
-/// when a task returned it.
-pub fn on_threads<F>(data: &mut [f32], chunk: usize, task: F) -> bool
+/// Multiply-adds from which a product is worth the pool's dispatch (a few microseconds a call):
+/// the Swin windows' 49 x 49 x 32 products run on the calling thread.
+pub const PARALLEL_MIN_MACS: usize = 1 << 20;
+
+/// Whether a product of `macs` multiply-adds (and its packing) goes to the pool.
+#[must_use]
+pub fn worth_threads(macs: usize) -> bool {
+    macs >= PARALLEL_MIN_MACS
+}
+
+/// `task(index, chunk)` over `data` in chunks of `chunk` values, on the engine's pool when
+/// `parallel`, else on this thread; `false` when a task returned it.
+pub fn on_threads<F>(parallel: bool, data: &mut [f32], chunk: usize, task: F) -> bool
 where
     F: Fn(usize, &mut [f32]) -> bool + Sync,
 {
     let chunk = chunk.max(1);
     match current_tract_executor() {
-        Executor::MultiThread(pool) => pool.install(|| {
+        Executor::MultiThread(pool) if parallel => pool.install(|| {
             data.par_chunks_mut(chunk)
                 .enumerate()
                 .all(|(i, c)| task(i, c))
@@ -298,6 +326,7 @@ mod tests {
             m,
             n,
             k,
+            ldc: n,
         };
         let mut c = vec![f32::NAN; m * n];
         assert!(product(&ops, &mut c, bias), "{m} x {n} x {k}");
@@ -312,6 +341,18 @@ mod tests {
         let mut c2 = vec![f32::NAN; m * n];
         assert!(product(&ops, &mut c2, bias), "{m} x {n} x {k}");
         assert_eq!(got, c2.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        // Into a wider C (row stride n + 5): the same values, the gaps untouched.
+        ops.ldc = n + 5;
+        let mut wide = vec![f32::NAN; ops.c_len()];
+        assert!(product(&ops, &mut wide, bias), "{m} x {n} x {k}");
+        for (r, row) in wide.chunks(n + 5).enumerate() {
+            let want: Vec<u32> = got[r * n..][..n].to_vec();
+            assert_eq!(
+                row[..n].iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                want
+            );
+            assert!(row[n..].iter().all(|v| v.is_nan()));
+        }
         (got, chain(&a, &b, m, n, k, bias))
     }
 
@@ -368,6 +409,7 @@ mod tests {
             m: 3,
             n: 2,
             k: 5,
+            ldc: 2,
         };
         assert!(!product(&ops, &mut [0.0; 6], Bias::None));
         let ops = Operands { k: 4, ..ops };

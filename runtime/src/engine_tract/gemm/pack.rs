@@ -169,6 +169,50 @@ pub fn pack_a_panel(a: &[f32], m: usize, k: usize, row_stride: usize, i: usize, 
     }
 }
 
+/// Panel `i` of an A read with strides: element `(row, kk)` at `row * rs + kk * cs` of `src`
+/// (`panel`: `MR * k` values, zeros past row `m`).
+pub fn pack_a_panel_strided(
+    src: &[f32],
+    (m, k): (usize, usize),
+    (rs, cs): (usize, usize),
+    i: usize,
+    panel: &mut [f32],
+) {
+    for r in 0..MR {
+        let row = i * MR + r;
+        for kk in 0..k {
+            panel[kk * MR + r] = if row < m {
+                src[row * rs + kk * cs]
+            } else {
+                0.0
+            };
+        }
+    }
+}
+
+/// Panel `j` of a B read with strides: element `(kk, col)` at `kk * rs + col * cs` of `src`
+/// (`panel`: `NR * k` values, zeros past column `n`).
+pub fn pack_b_panel_strided(
+    src: &[f32],
+    (k, n): (usize, usize),
+    (rs, cs): (usize, usize),
+    j: usize,
+    panel: &mut [f32],
+) {
+    let cols = NR.min(n - j * NR);
+    for (kk, dst) in panel.chunks_exact_mut(NR).take(k).enumerate() {
+        let row = &src[kk * rs + j * NR * cs..];
+        if cs == 1 {
+            dst[..cols].copy_from_slice(&row[..cols]);
+        } else {
+            for (c, v) in dst[..cols].iter_mut().enumerate() {
+                *v = row[c * cs];
+            }
+        }
+        dst[cols..].fill(0.0);
+    }
+}
+
 /// Write row `kk` of B (its `n` values in `row`) into the packed buffer `dst` of depth `k`.
 /// The padding columns of the last panel are left as they are (zero in a fresh buffer).
 pub fn pack_b_row(row: &[f32], kk: usize, k: usize, dst: &mut [f32]) {

@@ -1,0 +1,376 @@
+//! Products of two activations (attention's scores `Q K^T` and weighted values `P V`, per head
+//! and window) as the native product.
+//!
+//! After decluttering they are [`EinSum`]s of two non-constant f32 operands with one summed
+//! axis, one axis of each operand kept in the output and any number of batch axes (heads,
+//! windows). [`native_batched`] rewrites each into a [`BatchedProduct`]: per batch, both
+//! operands packed from their strided layout and [`gemm::product`] writing straight into the
+//! output, whose last axis must be one operand's kept axis (the product's columns). tract plans
+//! these with a run-time packing of the `[heads, 2000, 2000]` probabilities that cost as much as
+//! the product (docs/perf.md). Bit for bit with tract's plan (its kernels sum `k` in one chain
+//! from zero for these shapes; this module's tests, on products built here and on every stage of
+//! the committed default bundle). On the AVX-512 tier only, as [`gemm`].
+
+use tract_nnef::internal::*;
+use tract_nnef::tract_core::ops::einsum::EinSum;
+
+use super::gemm::{self, MR, NR, pack};
+
+/// Rows from which a product runs natively (fewer: tract's matrix-vector kernels, another sum
+/// order).
+pub const MIN_ROWS: usize = 8;
+
+/// One axis's extent and its element stride in A, B and the output (0 where absent).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct AxisStrides {
+    /// Extent.
+    pub len: usize,
+    /// Stride in A.
+    pub a: usize,
+    /// Stride in B.
+    pub b: usize,
+    /// Stride in the output.
+    pub c: usize,
+}
+
+/// `C[batch.., m, n] = sum_k A[batch.., m, k] B[batch.., k, n]` over operands and output laid
+/// out with the strides recorded here (`n` contiguous in the output).
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct BatchedProduct {
+    /// The op's input that is A (the other is B).
+    pub a_input: usize,
+    /// The two inputs' shapes, in input order.
+    pub inputs: [TVec<usize>; 2],
+    /// The output's shape.
+    pub output: TVec<usize>,
+    /// Batch axes.
+    pub batch: TVec<AxisStrides>,
+    /// Rows (in A and the output).
+    pub m: AxisStrides,
+    /// Columns (in B and the output, stride 1 there).
+    pub n: AxisStrides,
+    /// The summed axis (in A and B).
+    pub k: AxisStrides,
+}
+
+impl Op for BatchedProduct {
+    fn name(&self) -> StaticName {
+        "BatchedProduct".into()
+    }
+    op_as_typed_op!();
+}
+
+impl EvalOp for BatchedProduct {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let (x, y) = args_2!(inputs);
+        ensure!(
+            x.shape() == &*self.inputs[0] && y.shape() == &*self.inputs[1],
+            "BatchedProduct inputs {:?} {:?}",
+            x.shape(),
+            y.shape()
+        );
+        let (px, py) = (x.try_as_plain_ram()?, y.try_as_plain_ram()?);
+        let (xs, ys) = (px.as_slice::<f32>()?, py.as_slice::<f32>()?);
+        let (a_all, b_all) = if self.a_input == 0 {
+            (xs, ys)
+        } else {
+            (ys, xs)
+        };
+        let mut out = Tensor::zero::<f32>(&self.output)?;
+        let mut po = out.try_as_plain_ram_mut()?;
+        let c_all = po.as_slice_mut::<f32>()?;
+        let (m, n, k) = (self.m.len, self.n.len, self.k.len);
+        let parallel = gemm::worth_threads(m * n * k);
+        let batches: usize = self.batch.iter().map(|b| b.len).product();
+        for index in 0..batches {
+            // The batch's offsets in A, B and C, last batch axis fastest.
+            let (mut rest, mut off) = (index, [0usize; 3]);
+            for ax in self.batch.iter().rev() {
+                let i = rest % ax.len;
+                rest /= ax.len;
+                off[0] += i * ax.a;
+                off[1] += i * ax.b;
+                off[2] += i * ax.c;
+            }
+            let (a_src, b_src) = (&a_all[off[0]..], &b_all[off[1]..]);
+            let a_len = gemm::panels(m, MR) * MR * k;
+            let b_len = gemm::panels(n, NR) * NR * k;
+            let done = pack::with_scratch(a_len + b_len, |scratch| {
+                let (a, b) = scratch.split_at_mut(a_len);
+                gemm::on_threads(parallel, a, MR * k, |i, panel| {
+                    pack::pack_a_panel_strided(a_src, (m, k), (self.m.a, self.k.a), i, panel);
+                    true
+                });
+                gemm::on_threads(parallel, b, NR * k, |j, panel| {
+                    pack::pack_b_panel_strided(b_src, (k, n), (self.k.b, self.n.b), j, panel);
+                    true
+                });
+                let ops = gemm::Operands {
+                    a,
+                    b: gemm::BSource::Packed(b),
+                    m,
+                    n,
+                    k,
+                    ldc: self.m.c,
+                };
+                let c = &mut c_all[off[2]..][..ops.c_len()];
+                gemm::product(&ops, c, gemm::Bias::None)
+            });
+            ensure!(
+                done,
+                "native product refused (AVX-512 missing or operands mis-sized)"
+            );
+        }
+        Ok(tvec!(out.into_tvalue()))
+    }
+}
+
+impl TypedOp for BatchedProduct {
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        ensure!(inputs.len() == 2 && inputs.iter().all(|f| f.datum_type == f32::datum_type()));
+        Ok(tvec!(f32::fact(&*self.output)))
+    }
+
+    fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
+        let batches: usize = self.batch.iter().map(|b| b.len).product();
+        let fma = batches * self.m.len * self.n.len * self.k.len;
+        Ok(tvec!((Cost::FMA(f32::datum_type()), fma.to_dim())))
+    }
+
+    as_op!();
+}
+
+/// Row-major element strides of `shape`.
+fn strides(shape: &[usize]) -> TVec<usize> {
+    let mut s: TVec<usize> = tvec![1; shape.len()];
+    for i in (0..shape.len().saturating_sub(1)).rev() {
+        s[i] = s[i + 1] * shape[i + 1];
+    }
+    s
+}
+
+/// The node `id` as a [`BatchedProduct`]: an f32 [`EinSum`] of two non-constant operands of
+/// concrete shapes, every axis a batch axis (in both operands and the output), a kept axis of
+/// one operand, or the one summed axis (in both operands only), with one kept axis each and
+/// the output's last axis one of them.
+fn as_batched(model: &TypedModel, id: usize) -> TractResult<Option<BatchedProduct>> {
+    let node = model.node(id);
+    let Some(es) = node.op_as::<EinSum>() else {
+        return Ok(None);
+    };
+    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let facts = model.node_input_facts(id)?;
+    let out_fact = model.outlet_fact(OutletId::new(id, 0))?;
+    let plain = |f: &TypedFact| f.datum_type == f32::datum_type() && f.konst.is_none();
+    if !facts.iter().all(|f| plain(f)) {
+        return Ok(None);
+    }
+    let (Some(s0), Some(s1), Some(so)) = (
+        facts[0].shape.as_concrete(),
+        facts[1].shape.as_concrete(),
+        out_fact.shape.as_concrete(),
+    ) else {
+        return Ok(None);
+    };
+    let st = [strides(s0), strides(s1), strides(so)];
+    let (mut batch, mut kept, mut summed) = (tvec![], [None, None], None);
+    for axis in es.axes.iter_all_axes() {
+        let (i0, i1, o) = (&axis.inputs[0], &axis.inputs[1], &axis.outputs[0]);
+        if i0.len() > 1 || i1.len() > 1 || o.len() > 1 {
+            return Ok(None);
+        }
+        let at = |which: usize, pos: Option<&usize>| pos.map_or(0, |&p| st[which][p]);
+        let len = i0
+            .first()
+            .map(|&p| s0[p])
+            .or(i1.first().map(|&p| s1[p]))
+            .or(o.first().map(|&p| so[p]))
+            .unwrap_or(1);
+        // Strides as (input 0, input 1, output) for now; ordered as A, B below.
+        let strides = AxisStrides {
+            len,
+            a: at(0, i0.first()),
+            b: at(1, i1.first()),
+            c: at(2, o.first()),
+        };
+        match (i0.first(), i1.first(), o.first()) {
+            (Some(_), Some(_), Some(_)) => batch.push(strides),
+            (Some(_), None, Some(&po)) if kept[0].is_none() => kept[0] = Some((strides, po)),
+            (None, Some(_), Some(&po)) if kept[1].is_none() => kept[1] = Some((strides, po)),
+            (Some(_), Some(_), None) if summed.is_none() => summed = Some(strides),
+            _ => return Ok(None),
+        }
+    }
+    let (Some(k0), Some(k1), Some(k)) = (kept[0], kept[1], summed) else {
+        return Ok(None);
+    };
+    // B is the operand whose kept axis is the output's last (the product's columns).
+    let last = so.len() - 1;
+    let swap = |s: AxisStrides| AxisStrides {
+        a: s.b,
+        b: s.a,
+        ..s
+    };
+    let (a_input, m, n, k, batch) = if k1.1 == last {
+        (0, k0.0, k1.0, k, batch)
+    } else if k0.1 == last {
+        (
+            1,
+            swap(k1.0),
+            swap(k0.0),
+            swap(k),
+            batch.into_iter().map(swap).collect(),
+        )
+    } else {
+        return Ok(None);
+    };
+    Ok(Some(BatchedProduct {
+        a_input,
+        inputs: [s0.into(), s1.into()],
+        output: so.into(),
+        batch,
+        m,
+        n,
+        k,
+    }))
+}
+
+/// Rewrite every product of two activations of a decluttered `model` with at least
+/// [`MIN_ROWS`] rows and two columns into a [`BatchedProduct`]; returns the model and the
+/// number rewritten.
+///
+/// # Errors
+/// tract refusing a patch (an inconsistent model).
+pub fn native_batched(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
+    let mut done = 0;
+    for id in model.eval_order()? {
+        let Some(op) = as_batched(&model, id)? else {
+            continue;
+        };
+        if op.m.len < MIN_ROWS || op.n.len < 2 || op.k.len == 0 {
+            continue;
+        }
+        let node = model.node(id);
+        let patch = TypedModelPatch::replace_single_op(&model, node, &node.inputs, op)?;
+        patch.apply(&mut model)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The pass against tract's own plan, bit for bit: on the attention products of `nano`'s
+    //! decoder and the Swin windows (shapes shrunk), and on every stage of the committed
+    //! default bundle.
+    use super::*;
+    use crate::engine::Stage;
+    use crate::engine_tract::rewrite::Pass;
+    use crate::engine_tract::test_support::{
+        assert_same_bits, bits, committed_stage_before, inputs_of, run_optimized,
+    };
+
+    fn values(len: usize, seed: usize) -> Vec<f32> {
+        (0..len)
+            .map(|i| ((i * 7919 + seed * 104_729) % 1013) as f32 / 500.0 - 1.0)
+            .collect()
+    }
+
+    /// `x . y` as the einsum `expr` over operands of shapes `sx`, `sy`, and its inputs.
+    fn product_model(expr: &str, sx: &[usize], sy: &[usize]) -> (TypedModel, TVec<TValue>) {
+        let mut model = TypedModel::default();
+        let x = model.add_source("x", f32::fact(sx)).unwrap();
+        let y = model.add_source("y", f32::fact(sy)).unwrap();
+        let es = EinSum {
+            axes: expr.parse().unwrap(),
+            operating_dt: f32::datum_type(),
+            q_params: None,
+        };
+        let z = model.wire_node("mm", es, &[x, y]).unwrap();
+        model.select_output_outlets(&z).unwrap();
+        let lx: usize = sx.iter().product();
+        let ly: usize = sy.iter().product();
+        let inputs = tvec![
+            Tensor::from_shape(sx, &values(lx, 1)).unwrap().into_tvalue(),
+            Tensor::from_shape(sy, &values(ly, 2)).unwrap().into_tvalue(),
+        ];
+        (model.into_decluttered().unwrap(), inputs)
+    }
+
+    #[test]
+    fn attention_products_run_natively_with_tracts_bits() {
+        if !gemm::available() {
+            eprintln!("no AVX-512 here: the pass does not run on this CPU");
+            return;
+        }
+        for (expr, sx, sy) in [
+            // Decoder self-attention scores and weighted values (4 heads).
+            ("mak,nak->amn", vec![200, 4, 64], vec![150, 4, 64]),
+            ("amk,kan->man", vec![4, 200, 150], vec![150, 4, 64]),
+            // Swin window attention: windows and heads as two batch axes.
+            ("abmk,abnk->abmn", vec![3, 2, 49, 32], vec![3, 2, 49, 32]),
+            ("abmk,abkn->ambn", vec![3, 2, 49, 49], vec![3, 2, 49, 32]),
+            // The output's last axis from the first operand: the operands swap roles.
+            ("kn,km->mn", vec![70, 40], vec![70, 30]),
+        ] {
+            let (model, inputs) = product_model(expr, &sx, &sy);
+            let (native, done) = native_batched(model.clone()).unwrap();
+            assert_eq!(done, 1, "{expr}");
+            assert!(native.nodes().iter().any(|n| n.op_is::<BatchedProduct>()));
+            let want = run_optimized(model, &inputs);
+            let got = run_optimized(native, &inputs);
+            assert_eq!(got[0].shape(), want[0].shape(), "{expr}");
+            assert_eq!(bits(&got[0]), bits(&want[0]), "{expr}");
+        }
+    }
+
+    #[test]
+    fn constant_operands_and_single_rows_keep_tracts_plan() {
+        // One row: tract's matrix-vector kernels.
+        let (model, _) = product_model("mk,kn->mn", &[1, 64], &[64, 64]);
+        assert_eq!(native_batched(model).unwrap().1, 0);
+        // A constant operand is a linear layer's (`linear`), not this pass's.
+        let (mut model, _) = product_model("mk,kn->mn", &[64, 64], &[64, 64]);
+        let w = model.add_const("w", Tensor::zero::<f32>(&[64, 64]).unwrap()).unwrap();
+        let x = model.input_outlets().unwrap()[0];
+        let es = EinSum {
+            axes: "mk,kn->mn".parse().unwrap(),
+            operating_dt: f32::datum_type(),
+            q_params: None,
+        };
+        let z = model.wire_node("mm_const", es, &[x, w]).unwrap()[0];
+        let first = model.output_outlets().unwrap()[0];
+        model.select_output_outlets(&[first, z]).unwrap();
+        let (_, done) = native_batched(model.into_decluttered().unwrap()).unwrap();
+        assert_eq!(done, 1, "only the product of the two sources");
+    }
+
+    #[test]
+    fn a_wrong_input_is_an_error_value() {
+        let (model, _) = product_model("mk,kn->mn", &[16, 8], &[8, 4]);
+        let id = model
+            .nodes()
+            .iter()
+            .position(|n| n.op_is::<EinSum>())
+            .unwrap();
+        let op = as_batched(&model, id).unwrap().unwrap();
+        let x = Tensor::zero::<f32>(&[16, 9]).unwrap().into_tvalue();
+        let y = Tensor::zero::<f32>(&[9, 4]).unwrap().into_tvalue();
+        assert!(op.eval_out_of_plan(tvec!(x, y)).is_err());
+    }
+
+    #[test]
+    fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
+        for stage in Stage::ALL {
+            let plain = committed_stage_before(stage, Pass::NativeBatched);
+            let inputs = inputs_of(&plain);
+            let (native, _) = native_batched(plain.clone()).expect("rewrite");
+            let (a, b) = (run_optimized(plain, &inputs), run_optimized(native, &inputs));
+            assert_same_bits(stage, &a, &b);
+        }
+    }
+}
