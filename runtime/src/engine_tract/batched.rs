@@ -78,7 +78,7 @@ impl EvalOp for BatchedProduct {
         } else {
             (ys, xs)
         };
-        let mut out = Tensor::zero::<f32>(&self.output)?;
+        let mut out = gemm::output_tensor(&self.output)?;
         let mut po = out.try_as_plain_ram_mut()?;
         let c_all = po.as_slice_mut::<f32>()?;
         let (m, n, k) = (self.m.len, self.n.len, self.k.len);
@@ -155,7 +155,7 @@ fn strides(shape: &[usize]) -> TVec<usize> {
 /// concrete shapes, every axis a batch axis (in both operands and the output), a kept axis of
 /// one operand, or the one summed axis (in both operands only), with one kept axis each and
 /// the output's last axis one of them.
-fn as_batched(model: &TypedModel, id: usize) -> TractResult<Option<BatchedProduct>> {
+pub(crate) fn as_batched(model: &TypedModel, id: usize) -> TractResult<Option<BatchedProduct>> {
     let node = model.node(id);
     let Some(es) = node.op_as::<EinSum>() else {
         return Ok(None);
@@ -295,8 +295,12 @@ mod tests {
         let lx: usize = sx.iter().product();
         let ly: usize = sy.iter().product();
         let inputs = tvec![
-            Tensor::from_shape(sx, &values(lx, 1)).unwrap().into_tvalue(),
-            Tensor::from_shape(sy, &values(ly, 2)).unwrap().into_tvalue(),
+            Tensor::from_shape(sx, &values(lx, 1))
+                .unwrap()
+                .into_tvalue(),
+            Tensor::from_shape(sy, &values(ly, 2))
+                .unwrap()
+                .into_tvalue(),
         ];
         (model.into_decluttered().unwrap(), inputs)
     }
@@ -335,7 +339,9 @@ mod tests {
         assert_eq!(native_batched(model).unwrap().1, 0);
         // A constant operand is a linear layer's (`linear`), not this pass's.
         let (mut model, _) = product_model("mk,kn->mn", &[64, 64], &[64, 64]);
-        let w = model.add_const("w", Tensor::zero::<f32>(&[64, 64]).unwrap()).unwrap();
+        let w = model
+            .add_const("w", Tensor::zero::<f32>(&[64, 64]).unwrap())
+            .unwrap();
         let x = model.input_outlets().unwrap()[0];
         let es = EinSum {
             axes: "mk,kn->mn".parse().unwrap(),
@@ -369,7 +375,10 @@ mod tests {
             let plain = committed_stage_before(stage, Pass::NativeBatched);
             let inputs = inputs_of(&plain);
             let (native, _) = native_batched(plain.clone()).expect("rewrite");
-            let (a, b) = (run_optimized(plain, &inputs), run_optimized(native, &inputs));
+            let (a, b) = (
+                run_optimized(plain, &inputs),
+                run_optimized(native, &inputs),
+            );
             assert_same_bits(stage, &a, &b);
         }
     }

@@ -173,7 +173,7 @@ impl EvalOp for UnfoldConv {
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let co = self.out_channels;
-        let mut out = Tensor::zero::<f32>(&self.output_shape())?;
+        let mut out = gemm::output_tensor(&self.output_shape())?;
         let mut po = out.try_as_plain_ram_mut()?;
         let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
             self.unfold.fill_panels(xs, (j, pc, kc), dst);

@@ -78,7 +78,7 @@ impl EvalOp for PackedLinear {
         let xs = px.as_slice::<f32>()?;
         let k = self.k();
         let m = xs.len() / k.max(1);
-        let mut out = Tensor::zero::<f32>(&self.output_shape())?;
+        let mut out = gemm::output_tensor(&self.output_shape())?;
         let mut po = out.try_as_plain_ram_mut()?;
         let c = po.as_slice_mut::<f32>()?;
         let bias = match &self.bias {

@@ -21,6 +21,7 @@ use std::sync::Arc;
 
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
+pub mod attention;
 pub mod batched;
 pub mod bilinear;
 pub mod broadcast;

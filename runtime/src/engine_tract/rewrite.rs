@@ -17,8 +17,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear, natural_consts,
-    softmax, weighted_sum,
+    attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear,
+    natural_consts, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -43,6 +43,9 @@ pub struct Rewrites {
     /// Products of two activations (attention) run as [`batched::BatchedProduct`]
     /// ([`batched::native_batched`]; on the AVX-512 tier only).
     pub native_batched: usize,
+    /// `scores -> softmax -> values` chains run as [`attention::FusedAttention`]
+    /// ([`attention::fuse_attention`]; on the AVX-512 tier only).
+    pub fused_attentions: usize,
     /// Convolutions tract would run direct spatial planned with im2col and its matmul instead
     /// ([`conv_direct::im2col_wide_stems`]: the image stems of 64 channels or more).
     pub im2col_stems: usize,
@@ -62,6 +65,7 @@ pub(crate) enum Pass {
     RowSoftmaxes,
     UnfoldConvs,
     NativeLinears,
+    FusedAttention,
     NativeBatched,
     Im2colStems,
     Fold,
@@ -99,6 +103,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::NativeLinears) && native {
         (model, done.native_linears) = linear::native_linears(model)?;
+    }
+    if runs(Pass::FusedAttention) && native {
+        (model, done.fused_attentions) = attention::fuse_attention(model)?;
     }
     if runs(Pass::NativeBatched) && native {
         (model, done.native_batched) = batched::native_batched(model)?;

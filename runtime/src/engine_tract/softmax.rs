@@ -84,7 +84,7 @@ impl RowSoftmax {
 }
 
 /// The contract of the module doc over `block` (whole rows of `row_len`), in place.
-fn softmax_block(
+pub(crate) fn softmax_block(
     block: &mut [f32],
     row_len: usize,
     exp: &dyn MapReduce<f32, f32>,

@@ -134,7 +134,8 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
 fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
-    let parallel = worth_threads(m * n * k);
+    // Inside a pool task already (an op's own split): the product stays on that thread.
+    let parallel = worth_threads(m * n * k) && rayon::current_thread_index().is_none();
     let rows_per_task = MR * panels(m, MR).div_ceil(2 * threads()).max(1);
     for jc in (0..n_panels).step_by(NC_PANELS) {
         let js = jc..(jc + NC_PANELS).min(n_panels);
@@ -231,6 +232,20 @@ impl Block<'_> {
         }
         true
     }
+}
+
+/// An f32 tensor of `shape` for products that write every one of its values (the rewrites'
+/// ops: their products cover the output), left unwritten: zeroing the decoder's
+/// `[4, 2000, 2000]` scores first cost a pass over 64 MB.
+///
+/// # Errors
+/// tract refusing the shape (its size overflowing).
+pub fn output_tensor(
+    shape: &[usize],
+) -> tract_nnef::prelude::TractResult<tract_nnef::prelude::Tensor> {
+    // SAFETY: f32 has no invalid bit patterns, and each caller's products store every value
+    // before the tensor leaves the op (on an error it is dropped unread).
+    unsafe { tract_nnef::prelude::Tensor::uninitialized::<f32>(shape) }
 }
 
 /// Threads of the engine's pool (1 outside one).

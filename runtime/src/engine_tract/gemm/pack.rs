@@ -156,15 +156,13 @@ pub fn pack_a(a: &[f32], m: usize, k: usize, row_stride: usize, dst: &mut [f32])
 pub fn pack_a_panel(a: &[f32], m: usize, k: usize, row_stride: usize, i: usize, panel: &mut [f32]) {
     for r in 0..MR {
         let row = i * MR + r;
+        let dst = panel.chunks_exact_mut(MR).take(k).map(|d| &mut d[r]);
         if row < m {
-            let src = &a[row * row_stride..][..k];
-            for (kk, &v) in src.iter().enumerate() {
-                panel[kk * MR + r] = v;
+            for (d, &v) in dst.zip(&a[row * row_stride..][..k]) {
+                *d = v;
             }
         } else {
-            for kk in 0..k {
-                panel[kk * MR + r] = 0.0;
-            }
+            dst.for_each(|d| *d = 0.0);
         }
     }
 }
