@@ -255,7 +255,9 @@ mod tests {
     fn attention_model(queries: usize, keys: usize) -> (TypedModel, TVec<TValue>) {
         let (heads, d) = (3, 16);
         let mut model = TypedModel::default();
-        let q = model.add_source("q", f32::fact([queries, heads, d])).unwrap();
+        let q = model
+            .add_source("q", f32::fact([queries, heads, d]))
+            .unwrap();
         let k = model.add_source("k", f32::fact([keys, heads, d])).unwrap();
         let v = model.add_source("v", f32::fact([keys, heads, d])).unwrap();
         let einsum = |expr: &str| EinSum {
@@ -263,7 +265,9 @@ mod tests {
             operating_dt: f32::datum_type(),
             q_params: None,
         };
-        let s = model.wire_node("scores", einsum("mak,nak->amn"), &[q, k]).unwrap();
+        let s = model
+            .wire_node("scores", einsum("mak,nak->amn"), &[q, k])
+            .unwrap();
         let softmax = Softmax::new(tvec![2], None, SoftmaxKind::default());
         let p = model.wire_node("softmax", softmax, &s).unwrap();
         let o = model

@@ -131,18 +131,28 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
 }
 
 /// [`product`]'s blocks, B's filled into `scratch` where it is filled.
+///
+/// On the pool, a B that is filled (a convolution's patches) splits by columns: each task
+/// fills and multiplies its own column panels for every row, into a C of its own copied into
+/// place at the end, with no step in common (filled blocks need one per block otherwise). A
+/// packed B (a linear layer's weights, narrow) splits by rows of C.
 fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
     // Inside a pool task already (an op's own split): the product stays on that thread.
     let parallel = worth_threads(m * n * k) && rayon::current_thread_index().is_none();
-    let rows_per_task = MR * panels(m, MR).div_ceil(2 * threads()).max(1);
+    let tasks = 2 * threads();
+    if parallel && matches!(b, BSource::Fill(_)) && n_panels >= tasks {
+        return column_split(ops, c, bias, n_panels.div_ceil(tasks).min(NC_PANELS));
+    }
+    let rows_per_task = MR * panels(m, MR).div_ceil(tasks).max(1);
     for jc in (0..n_panels).step_by(NC_PANELS) {
         let js = jc..(jc + NC_PANELS).min(n_panels);
         for pc in (0..k).step_by(KC) {
             let kc = KC.min(k - pc);
             let block = Block {
                 js: js.clone(),
+                c_first: 0,
                 pc,
                 kc,
                 b: match b {
@@ -162,7 +172,13 @@ fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]
                 },
             };
             let done = on_threads(parallel, &mut c[..], rows_per_task * ldc, |t, rows| {
-                block.tiles(a, (t * rows_per_task / MR, rows), (n, k, ldc), bias)
+                let rows_here = (rows.len() + ldc - n) / ldc;
+                block.tiles(
+                    a,
+                    (t * rows_per_task / MR, rows_here, rows),
+                    (n, k, ldc),
+                    bias,
+                )
             });
             if !done {
                 return false;
@@ -172,9 +188,64 @@ fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]
     true
 }
 
-/// One block of the product: B panels `js` over depth rows `pc..pc + kc`.
+/// [`blocks`] split by columns: tasks of `per_task` B panels on the pool.
+fn column_split(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, per_task: usize) -> bool {
+    let Operands { a, b, m, n, k, ldc } = *ops;
+    let n_panels = panels(n, NR);
+    let shared = std::sync::Mutex::new(c);
+    let task = |t: usize| -> bool {
+        let js = t * per_task..((t + 1) * per_task).min(n_panels);
+        let col0 = js.start * NR;
+        let cols = n.min(js.end * NR) - col0;
+        let fill_len = match b {
+            BSource::Fill(_) => js.len() * KC.min(k) * NR,
+            BSource::Packed(_) => 0,
+        };
+        pack::with_scratch(m * cols + fill_len, |buf| {
+            let (local, fill_buf) = buf.split_at_mut(m * cols);
+            for pc in (0..k).step_by(KC) {
+                let kc = KC.min(k - pc);
+                let block = Block {
+                    js: js.clone(),
+                    c_first: js.start,
+                    pc,
+                    kc,
+                    b: match b {
+                        BSource::Packed(all) => BlockB::Whole(all, k),
+                        BSource::Fill(fill) => {
+                            let dst = &mut fill_buf[..js.len() * kc * NR];
+                            for (f, panels) in dst.chunks_mut(FILL_PANELS * kc * NR).enumerate() {
+                                fill(js.start + f * FILL_PANELS, pc, kc, panels);
+                            }
+                            BlockB::Block(dst)
+                        }
+                    },
+                };
+                if !block.tiles(a, (0, m, &mut local[..]), (n, k, cols), bias) {
+                    return false;
+                }
+            }
+            let Ok(mut c) = shared.lock() else {
+                return false;
+            };
+            for (r, row) in local.chunks_exact(cols).enumerate() {
+                c[r * ldc + col0..][..cols].copy_from_slice(row);
+            }
+            true
+        })
+    };
+    let tasks = n_panels.div_ceil(per_task);
+    match current_tract_executor() {
+        Executor::MultiThread(pool) => pool.install(|| (0..tasks).into_par_iter().all(task)),
+        _ => (0..tasks).all(task),
+    }
+}
+
+/// One block of the product: B panels `js` over depth rows `pc..pc + kc`, into a C whose first
+/// column is that of panel `c_first`.
 struct Block<'a> {
     js: std::ops::Range<usize>,
+    c_first: usize,
     pc: usize,
     kc: usize,
     b: BlockB<'a>,
@@ -189,18 +260,17 @@ enum BlockB<'a> {
 }
 
 impl Block<'_> {
-    /// The block's tiles over the rows of C from A panel `first` (`rows`: the rows of C at
-    /// `ldc` apart, the last one `n` long at least).
+    /// The block's tiles over `rows_here` rows of C from A panel `first` (`rows`: those rows
+    /// at `ldc` apart; `n` the product's columns).
     fn tiles(
         &self,
         a: &[f32],
-        (first, rows): (usize, &mut [f32]),
+        (first, rows_here, rows): (usize, usize, &mut [f32]),
         (n, k, ldc): (usize, usize, usize),
         bias: Bias<'_>,
     ) -> bool {
         let Self { pc, kc, .. } = *self;
         let last = pc + kc == k;
-        let rows_here = (rows.len() + ldc - n) / ldc;
         for ii in 0..rows_here.div_ceil(MR) {
             let i = first + ii;
             let a_blk = &a[(i * k + pc) * MR..][..kc * MR];
@@ -218,7 +288,7 @@ impl Block<'_> {
                 let done = kernel::run(kernel::Tile {
                     a: a_blk,
                     b: b_blk,
-                    c: &mut rows[ii * MR * ldc + j * NR..],
+                    c: &mut rows[ii * MR * ldc + (j - self.c_first) * NR..],
                     ldc,
                     rows: MR.min(rows_here - ii * MR),
                     cols: NR.min(n - j * NR),
@@ -395,23 +465,26 @@ mod tests {
     }
 
     #[test]
-    fn threads_split_rows_without_moving_a_bit() {
+    fn threads_split_rows_and_columns_without_moving_a_bit() {
         if !available() {
             return;
         }
-        let (single, want) = run(100, 70, 300, true);
-        assert_eq!(single, want);
         let pool = std::sync::Arc::new(
             rayon::ThreadPoolBuilder::new()
                 .num_threads(2)
                 .build()
                 .unwrap(),
         );
-        let two =
-            tract_linalg::multithread::multithread_tract_scope(Executor::MultiThread(pool), || {
-                run(100, 70, 300, true).0
-            });
-        assert_eq!(two, want);
+        // 3 column panels: rows split; 10: a filled B splits by columns (`run` checks both).
+        for (m, n, k) in [(100, 70, 300), (100, 300, 300), (30, 2100, 520)] {
+            let (single, want) = run(m, n, k, true);
+            assert_eq!(single, want);
+            let two = tract_linalg::multithread::multithread_tract_scope(
+                Executor::MultiThread(pool.clone()),
+                || run(m, n, k, true).0,
+            );
+            assert_eq!(two, want, "{m} x {n} x {k}");
+        }
     }
 
     #[test]
