@@ -54,6 +54,12 @@ pub struct BatchedProduct {
 }
 
 impl Op for BatchedProduct {
+    fn info(&self) -> TractResult<Vec<String>> {
+        let batches: usize = self.batch.iter().map(|b| b.len).product();
+        let (m, k, n) = (self.m.len, self.k.len, self.n.len);
+        Ok(vec![format!("Mult: {batches}x m:{m} k:{k} n:{n} with [native]")])
+    }
+
     fn name(&self) -> StaticName {
         "BatchedProduct".into()
     }

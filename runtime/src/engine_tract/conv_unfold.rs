@@ -130,6 +130,14 @@ impl PartialEq for UnfoldConv {
 impl Eq for UnfoldConv {}
 
 impl Op for UnfoldConv {
+    fn info(&self) -> TractResult<Vec<String>> {
+        let [c, _, _] = self.unfold.input;
+        let [kh, kw] = self.unfold.kernel;
+        let [oh, ow] = self.unfold.output;
+        let (m, k, n) = (self.out_channels, c * kh * kw, oh * ow);
+        Ok(vec![format!("Mult: m:{m} k:{k} n:{n} with [native]")])
+    }
+
     fn name(&self) -> StaticName {
         "UnfoldConv".into()
     }

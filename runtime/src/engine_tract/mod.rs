@@ -651,7 +651,8 @@ impl Engine for TractEngine {
 /// (`Mult: m:64 k:576 n:3840 with [avx512_mmm_f32_16x12]`), so that one shape's cost shows.
 fn op_key(op: &dyn Op) -> String {
     let name = op.name();
-    if name != "OptMatMul" {
+    let products = ["OptMatMul", "PackedLinear", "UnfoldConv", "BatchedProduct"];
+    if !products.contains(&&*name) {
         return name.into_owned();
     }
     let info = op.info().unwrap_or_default();

@@ -134,15 +134,18 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
 ///
 /// On the pool, a B that is filled (a convolution's patches) splits by columns: each task
 /// fills and multiplies its own column panels for every row, into a C of its own copied into
-/// place at the end, with no step in common (filled blocks need one per block otherwise). A
-/// packed B (a linear layer's weights, narrow) splits by rows of C.
+/// place at the end, with no step in common (filled blocks need one per block otherwise). So
+/// does a packed B with fewer row panels than column panels (the Swin's last stages: 28 tokens
+/// against 3072 x 768 weights, where each thread then reads its share of the weights only).
+/// Otherwise (a linear layer over many tokens) the rows of C split.
 fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
     // Inside a pool task already (an op's own split): the product stays on that thread.
     let parallel = worth_threads(m * n * k) && rayon::current_thread_index().is_none();
     let tasks = 2 * threads();
-    if parallel && matches!(b, BSource::Fill(_)) && n_panels >= tasks {
+    let few_rows = panels(m, MR) < n_panels;
+    if parallel && n_panels >= tasks && (matches!(b, BSource::Fill(_)) || few_rows) {
         return column_split(ops, c, bias, n_panels.div_ceil(tasks).min(NC_PANELS));
     }
     let rows_per_task = MR * panels(m, MR).div_ceil(tasks).max(1);
