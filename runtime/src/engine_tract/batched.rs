@@ -57,7 +57,9 @@ impl Op for BatchedProduct {
     fn info(&self) -> TractResult<Vec<String>> {
         let batches: usize = self.batch.iter().map(|b| b.len).product();
         let (m, k, n) = (self.m.len, self.k.len, self.n.len);
-        Ok(vec![format!("Mult: {batches}x m:{m} k:{k} n:{n} with [native]")])
+        Ok(vec![format!(
+            "Mult: {batches}x m:{m} k:{k} n:{n} with [native]"
+        )])
     }
 
     fn name(&self) -> StaticName {
@@ -88,48 +90,88 @@ impl EvalOp for BatchedProduct {
         let mut po = out.try_as_plain_ram_mut()?;
         let c_all = po.as_slice_mut::<f32>()?;
         let (m, n, k) = (self.m.len, self.n.len, self.k.len);
-        let parallel = gemm::worth_threads(m * n * k);
         let batches: usize = self.batch.iter().map(|b| b.len).product();
-        for index in 0..batches {
-            // The batch's offsets in A, B and C, last batch axis fastest.
-            let (mut rest, mut off) = (index, [0usize; 3]);
-            for ax in self.batch.iter().rev() {
-                let i = rest % ax.len;
-                rest /= ax.len;
-                off[0] += i * ax.a;
-                off[1] += i * ax.b;
-                off[2] += i * ax.c;
-            }
-            let (a_src, b_src) = (&a_all[off[0]..], &b_all[off[1]..]);
-            let a_len = gemm::panels(m, MR) * MR * k;
-            let b_len = gemm::panels(n, NR) * NR * k;
-            let done = pack::with_scratch(a_len + b_len, |scratch| {
-                let (a, b) = scratch.split_at_mut(a_len);
-                gemm::on_threads(parallel, a, MR * k, |i, panel| {
-                    pack::pack_a_panel_strided(a_src, (m, k), (self.m.a, self.k.a), i, panel);
+        let done = if gemm::worth_threads(m * n * k) || !gemm::worth_threads(batches * m * n * k) {
+            // Large products split within; tiny ones in all stay on this thread.
+            (0..batches).all(|index| {
+                let [oa, ob, oc] = self.offsets(index);
+                let c = &mut c_all[oc..][..self.c_len()];
+                self.one(&a_all[oa..], &b_all[ob..], c, self.m.c)
+            })
+        } else {
+            // Many small ones (the Swin windows): batches split over the pool, each into a C of
+            // its own scattered into place (batches' rows may interleave in the output).
+            let shared = std::sync::Mutex::new(&mut *c_all);
+            gemm::on_pool(batches, |index| {
+                let [oa, ob, oc] = self.offsets(index);
+                pack::with_scratch(m * n, |local| {
+                    if !self.one(&a_all[oa..], &b_all[ob..], local, n) {
+                        return false;
+                    }
+                    let Ok(mut c) = shared.lock() else {
+                        return false;
+                    };
+                    for (r, row) in local.chunks_exact(n).enumerate() {
+                        c[oc + r * self.m.c..][..n].copy_from_slice(row);
+                    }
                     true
-                });
-                gemm::on_threads(parallel, b, NR * k, |j, panel| {
-                    pack::pack_b_panel_strided(b_src, (k, n), (self.k.b, self.n.b), j, panel);
-                    true
-                });
-                let ops = gemm::Operands {
-                    a,
-                    b: gemm::BSource::Packed(b),
-                    m,
-                    n,
-                    k,
-                    ldc: self.m.c,
-                };
-                let c = &mut c_all[off[2]..][..ops.c_len()];
-                gemm::product(&ops, c, gemm::Bias::None)
-            });
-            ensure!(
-                done,
-                "native product refused (AVX-512 missing or operands mis-sized)"
-            );
-        }
+                })
+            })
+        };
+        ensure!(
+            done,
+            "native product refused (AVX-512 missing or operands mis-sized)"
+        );
         Ok(tvec!(out.into_tvalue()))
+    }
+}
+
+impl BatchedProduct {
+    /// Offsets of batch `index` in A, B and the output (last batch axis fastest).
+    fn offsets(&self, index: usize) -> [usize; 3] {
+        let (mut rest, mut off) = (index, [0usize; 3]);
+        for ax in self.batch.iter().rev() {
+            let i = rest % ax.len;
+            rest /= ax.len;
+            off[0] += i * ax.a;
+            off[1] += i * ax.b;
+            off[2] += i * ax.c;
+        }
+        off
+    }
+
+    /// Values one batch's C spans in the output.
+    fn c_len(&self) -> usize {
+        (self.m.len - 1) * self.m.c + self.n.len
+    }
+
+    /// One batch: both operands packed from `a_src` and `b_src`, the product into `c` (rows
+    /// `ldc` apart).
+    fn one(&self, a_src: &[f32], b_src: &[f32], c: &mut [f32], ldc: usize) -> bool {
+        let (m, n, k) = (self.m.len, self.n.len, self.k.len);
+        let parallel = gemm::worth_threads(m * n * k);
+        let a_len = gemm::panels(m, MR) * MR * k;
+        let b_len = gemm::panels(n, NR) * NR * k;
+        pack::with_scratch(a_len + b_len, |scratch| {
+            let (a, b) = scratch.split_at_mut(a_len);
+            gemm::on_threads(parallel, a, MR * k, |i, panel| {
+                pack::pack_a_panel_strided(a_src, (m, k), (self.m.a, self.k.a), i, panel);
+                true
+            });
+            gemm::on_threads(parallel, b, NR * k, |j, panel| {
+                pack::pack_b_panel_strided(b_src, (k, n), (self.k.b, self.n.b), j, panel);
+                true
+            });
+            let ops = gemm::Operands {
+                a,
+                b: gemm::BSource::Packed(b),
+                m,
+                n,
+                k,
+                ldc,
+            };
+            gemm::product(&ops, &mut c[..ops.c_len()], gemm::Bias::None)
+        })
     }
 }
 
@@ -336,6 +378,28 @@ mod tests {
             assert_eq!(got[0].shape(), want[0].shape(), "{expr}");
             assert_eq!(bits(&got[0]), bits(&want[0]), "{expr}");
         }
+    }
+
+    #[test]
+    fn batches_on_the_pool_keep_the_bits() {
+        if !gemm::available() {
+            return;
+        }
+        // 32 windows of 49 tokens: each product too small to split, the batches split.
+        let (model, inputs) = product_model("abmk,abkn->ambn", &[8, 4, 49, 49], &[8, 4, 49, 32]);
+        let want = run_optimized(model.clone(), &inputs);
+        let native = native_batched(model).unwrap().0;
+        let pool = Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap(),
+        );
+        let got = tract_linalg::multithread::multithread_tract_scope(
+            tract_linalg::multithread::Executor::MultiThread(pool),
+            || run_optimized(native, &inputs),
+        );
+        assert_eq!(bits(&got[0]), bits(&want[0]));
     }
 
     #[test]

@@ -60,7 +60,11 @@ impl PackedLinear {
 impl Op for PackedLinear {
     fn info(&self) -> TractResult<Vec<String>> {
         let m = self.input.iter().product::<usize>() / self.k().max(1);
-        Ok(vec![format!("Mult: m:{m} k:{} n:{} with [native]", self.k(), self.n)])
+        Ok(vec![format!(
+            "Mult: m:{m} k:{} n:{} with [native]",
+            self.k(),
+            self.n
+        )])
     }
 
     fn name(&self) -> StaticName {

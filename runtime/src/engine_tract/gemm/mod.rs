@@ -237,9 +237,15 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, per_task: usi
             true
         })
     };
-    let tasks = n_panels.div_ceil(per_task);
+    on_pool(n_panels.div_ceil(per_task), task)
+}
+
+/// `task(i)` for `i` in `0..tasks`, on the engine's pool where there is one; `false` when a
+/// task returned it.
+pub fn on_pool(tasks: usize, task: impl Fn(usize) -> bool + Sync + Send) -> bool {
     match current_tract_executor() {
-        Executor::MultiThread(pool) => pool.install(|| (0..tasks).into_par_iter().all(task)),
+        Executor::MultiThread(pool) => pool.install(|| (0..tasks).into_par_iter().all(&task)),
+        // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
         _ => (0..tasks).all(task),
     }
 }
