@@ -20,6 +20,10 @@ use super::gemm::{self, MR, NR, pack};
 /// order).
 pub const MIN_ROWS: usize = 8;
 
+/// Columns from which a product runs natively: narrower (`test`'s 8-wide heads) leaves most of
+/// the kernel's 32 columns empty, and tract's plan was faster.
+pub const MIN_COLS: usize = 16;
+
 /// One axis's extent and its element stride in A, B and the output (0 where absent).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct AxisStrides {
@@ -288,7 +292,7 @@ pub(crate) fn as_batched(model: &TypedModel, id: usize) -> TractResult<Option<Ba
 }
 
 /// Rewrite every product of two activations of a decluttered `model` with at least
-/// [`MIN_ROWS`] rows and two columns into a [`BatchedProduct`]; returns the model and the
+/// [`MIN_ROWS`] rows and [`MIN_COLS`] columns into a [`BatchedProduct`]; returns the model and the
 /// number rewritten.
 ///
 /// # Errors
@@ -299,7 +303,7 @@ pub fn native_batched(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
         let Some(op) = as_batched(&model, id)? else {
             continue;
         };
-        if op.m.len < MIN_ROWS || op.n.len < 2 || op.k.len == 0 {
+        if op.m.len < MIN_ROWS || op.n.len < MIN_COLS || op.k.len == 0 {
             continue;
         }
         let node = model.node(id);

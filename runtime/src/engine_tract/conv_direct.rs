@@ -11,9 +11,8 @@
 //! 2.5-3.7), an m the matmul tiles mostly waste: the pass takes convolutions of
 //! [`MIN_OUTPUT_CHANNELS`] or more.
 //!
-//! On the AVX-512 tier [`conv_unfold`](super::conv_unfold) runs first and takes the stems whose
-//! unfolded operand fits its scratch (`nano`'s); this pass takes the rest (`paper`'s) and every
-//! stem on the other tiers.
+//! On the AVX-512 tier [`conv_unfold`](super::conv_unfold) runs first and takes these stems
+//! itself (same summation order as this pass's im2col); this pass takes them on the other tiers.
 //!
 //! [`im2col_wide_stems`] codegens each such convolution itself, before tract's optimiser, with
 //! tract's `TRACT_DISABLE_DIRECT_SPATIAL` scoped to that one node; tract then picks its im2col
@@ -32,7 +31,7 @@ use tract_nnef::tract_core::tract_data::knobs::KnobScope;
 pub const MIN_OUTPUT_CHANNELS: usize = 64;
 
 /// The name of tract's direct spatial convolution op (the op type is private).
-const DIRECT_SPATIAL_OP: &str = "DirectSpatialConv";
+pub(crate) const DIRECT_SPATIAL_OP: &str = "DirectSpatialConv";
 
 /// Codegen every convolution of a decluttered `model` that tract would run direct spatial and
 /// that has [`MIN_OUTPUT_CHANNELS`] outputs or more with im2col instead; returns the model and

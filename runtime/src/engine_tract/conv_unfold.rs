@@ -10,8 +10,9 @@
 //! in the padding) gathered straight into the product's packed blocks as it goes (no `[k, n]`
 //! matrix is ever laid out: the scratch is one block of [`gemm::KC`] x 1,024 values), the bias
 //! added to the finished sums. Narrower convolutions keep tract's plan (the product's 12-row
-//! tiles would be mostly empty); a 1x1 convolution is a matmul after decluttering
-//! ([`super::linear`]).
+//! tiles would be mostly empty), and so do those below 64 outputs that tract runs with its
+//! direct spatial kernel (`test`'s 8-channel stem: another summation order, and faster there);
+//! a 1x1 convolution is a matmul after decluttering ([`super::linear`]).
 //!
 //! Bit for bit: the product sums `k` in the order of tract's own im2col and of the OIHW weights
 //! (input channel, then kernel row, then kernel column) in one fused multiply-add chain from
@@ -23,6 +24,7 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::Conv;
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
+use super::conv_direct;
 use super::gemm::{self, NR, PackedA};
 
 /// The patches of a 2-D convolution of `[1, C, H, W]`, as a `[C * kh * kw, OH * OW]` matrix
@@ -225,7 +227,7 @@ impl TypedOp for UnfoldConv {
 
 /// Output channels from which a convolution is unfolded (below, the product's 12-row tiles are
 /// mostly empty and tract's plan is kept).
-pub const MIN_OUTPUT_CHANNELS: usize = 64;
+pub const MIN_OUTPUT_CHANNELS: usize = 16;
 
 /// Rewrite every f32 convolution of a decluttered `model` with one group, NCHW over two
 /// spatial axes (or CHW, the batch axis decluttered away), batch 1, constant weights and bias and at least [`MIN_OUTPUT_CHANNELS`]
@@ -263,6 +265,15 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         let (Some(kernel), Some(bias)) = (facts[1].konst.clone(), facts[2].konst.clone()) else {
             continue;
         };
+        // Below conv_direct's width tract's direct spatial kernel is kept (it sums in another
+        // order, and beats the product on `test`'s 8-channel stem).
+        if conv.output_channels() < conv_direct::MIN_OUTPUT_CHANNELS
+            && node.op.codegen(&model, node)?.is_some_and(|patch| {
+                conv_direct::has_op(&patch.model, conv_direct::DIRECT_SPATIAL_OP)
+            })
+        {
+            continue;
+        }
         let batch_axis = conv.pool_spec.data_format == DataFormat::NCHW;
         let (ci, h, w) = match *xs {
             [1, c, h, w] if batch_axis => (c, h, w),
@@ -351,6 +362,7 @@ mod tests {
                 ..ConvShape::new(32, 64, [13, 17], 3, 1, 2)
             },
             ConvShape::new(16, 96, [11, 9], 3, 2, 0),
+            ConvShape::new(16, 32, [23, 40], 3, 1, 1),
             ConvShape::new(128, 256, [12, 20], 3, 1, 1),
             ConvShape::new(300, 512, [6, 10], 3, 1, 1),
             ConvShape {
@@ -375,12 +387,17 @@ mod tests {
     }
 
     #[test]
-    fn narrow_convolutions_keep_tracts_plan() {
-        // 32 outputs: below the product's useful m.
-        let (model, _) = conv_model(&ConvShape::new(64, 32, [24, 40], 3, 1, 1));
-        let (same, n) = unfold_convs(model).unwrap();
-        assert_eq!(n, 0);
-        assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
+    fn narrow_and_direct_spatial_convolutions_keep_tracts_plan() {
+        // 8 outputs: below the product's useful m; a 16-channel stem tract runs direct spatial.
+        for s in [
+            ConvShape::new(64, 8, [24, 40], 3, 1, 1),
+            ConvShape::new(3, 16, [256, 320], 7, 2, 3),
+        ] {
+            let (model, _) = conv_model(&s);
+            let (same, n) = unfold_convs(model).unwrap();
+            assert_eq!(n, 0, "{} -> {}", s.ci, s.co);
+            assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
+        }
     }
 
     #[test]

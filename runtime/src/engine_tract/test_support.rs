@@ -83,20 +83,20 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // the decoder's (per stage, `Stage::ALL` order).
     let linears = if avx512 { [1, 6, 3, 18, 19] } else { [0; 5] };
     // Products of two activations: the Swin windows' attention where a window has 8 tokens or
-    // more, the decoder's live self-attention (scores and weighted values).
-    let batched = if avx512 { [0, 0, 0, 4, 2] } else { [0; 5] };
+    // more, the decoder's live self-attention scores (its 8-wide weighted values stay tract's).
+    let batched = if avx512 { [0, 0, 0, 4, 1] } else { [0; 5] };
+    // Convolutions of 16 channels or more: the tiny ResNet's but its direct spatial stem, the
+    // satellite FPN's, the decoder's input projection.
+    let convs = if avx512 { [7, 0, 0, 3, 1] } else { [0; 5] };
     let none = Rewrites {
         broadcast_binaries: broadcast[stage as usize],
         native_linears: linears[stage as usize],
         native_batched: batched[stage as usize],
+        unfolded_convs: convs[stage as usize],
         ..Rewrites::default()
     };
     match stage {
-        // The tiny ResNet's two 64-channel 3x3 convolutions, unfolded on the AVX-512 tier.
-        Stage::ImageEncoder => Rewrites {
-            unfolded_convs: if avx512 { 2 } else { 0 },
-            ..none
-        },
+        Stage::ImageEncoder => none,
         Stage::BevEncoder => none,
         // One deformable self-attention sampler; softmaxes of its sampling and GKT weights.
         Stage::BevQuery => Rewrites {
