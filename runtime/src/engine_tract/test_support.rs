@@ -158,6 +158,24 @@ pub(crate) fn run_plain(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TValue
         .expect("run")
 }
 
+/// A pass that runs before tract's optimiser (`rewrite` at `pass`) computes every committed
+/// stage as the graph it was given, bit for bit, both optimised as the engine plans them.
+pub(crate) fn assert_pass_keeps_stage_bits(
+    pass: Pass,
+    rewrite: fn(TypedModel) -> TractResult<(TypedModel, usize)>,
+) {
+    for stage in Stage::ALL {
+        let plain = committed_stage_before(stage, pass);
+        let inputs = inputs_of(&plain);
+        let (rewritten, _) = rewrite(plain.clone()).expect("rewrite");
+        let (a, b) = (
+            run_optimized(plain, &inputs),
+            run_optimized(rewritten, &inputs),
+        );
+        assert_same_bits(stage, &a, &b);
+    }
+}
+
 /// Two runs of `stage` computed the same outputs, bit for bit.
 pub(crate) fn assert_same_bits(stage: Stage, a: &[TValue], b: &[TValue]) {
     assert_eq!(a.len(), b.len(), "{stage}: output count");

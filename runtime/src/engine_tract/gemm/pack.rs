@@ -42,12 +42,6 @@ impl AlignedBuf {
     pub fn as_mut_slice(&mut self) -> &mut [f32] {
         &mut self.raw[self.start..][..self.len]
     }
-
-    /// Bytes held (the allocation, alignment slack included).
-    #[must_use]
-    pub fn bytes(&self) -> usize {
-        self.raw.len() * size_of::<f32>()
-    }
 }
 
 std::thread_local! {
@@ -101,12 +95,6 @@ impl PackedA {
     pub fn as_slice(&self) -> &[f32] {
         self.buf.as_slice()
     }
-
-    /// Bytes held.
-    #[must_use]
-    pub fn bytes(&self) -> usize {
-        self.buf.bytes()
-    }
 }
 
 /// A `k x n` B operand packed once (the constant weights of a linear layer).
@@ -134,12 +122,6 @@ impl PackedB {
     #[must_use]
     pub fn as_slice(&self) -> &[f32] {
         self.buf.as_slice()
-    }
-
-    /// Bytes held.
-    #[must_use]
-    pub fn bytes(&self) -> usize {
-        self.buf.bytes()
     }
 }
 
