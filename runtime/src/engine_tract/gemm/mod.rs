@@ -10,8 +10,9 @@
 //! Bits: every output is one fused multiply-add chain over `k` ascending from zero, and the
 //! bias is added to the finished sum: what tract's f32 kernels compute (their tiles hold one
 //! accumulator per output and start from zero; each rewrite's tests compare with tract's plan
-//! bit for bit). The threads split the rows of C in whole panels; an output's arithmetic does
-//! not depend on which thread computes it, so the bits hold for any thread count.
+//! bit for bit). The threads split C in whole row panels or column panels ([`product`]); an
+//! output's arithmetic does not depend on which thread computes it, so the bits hold for any
+//! thread count.
 
 pub mod kernel;
 pub mod pack;
@@ -87,8 +88,8 @@ impl Operands<'_> {
 }
 
 /// The product into `c` (`m` rows of `n` values, row `r` at `r * ldc`, [`Operands::c_len`]
-/// long; the values between rows untouched) on the engine's threads: the blocks of B filled
-/// panel by panel, then the rows of C in whole A panels. `false` (C in an unspecified state)
+/// long; the values between rows untouched) on the engine's threads, split as [`blocks`]
+/// says. `false` (C in an unspecified state)
 /// for operands or a bias shorter than their sizes, or a CPU without AVX-512: the rewrites that
 /// plan this product check both, so that is a bug, never input.
 #[must_use]
