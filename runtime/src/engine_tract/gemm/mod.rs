@@ -88,7 +88,7 @@ impl Operands<'_> {
 }
 
 /// The product into `c` (`m` rows of `n` values, row `r` at `r * ldc`, [`Operands::c_len`]
-/// long; the values between rows untouched) on the engine's threads, split as [`blocks`]
+/// long; the values between rows untouched) on the engine's threads, split as `blocks`
 /// says. `false` (C in an unspecified state)
 /// for operands or a bias shorter than their sizes, or a CPU without AVX-512: the rewrites that
 /// plan this product check both, so that is a bug, never input.
