@@ -648,7 +648,8 @@ impl Engine for TractEngine {
 
 /// The key [`TractEngine::profile_ops`] sums a node's time under: tract's op name, and for a
 /// matrix product its `m`, `k`, `n` and kernel from tract's own description of the op
-/// (`Mult: m:64 k:576 n:3840 with [avx512_mmm_f32_16x12]`), so that one shape's cost shows.
+/// (`Mult: m:64 k:576 n:3840 with [avx512_mmm_f32_16x12]`), so that one shape's cost shows;
+/// the native products describe themselves the same way, with `native` for the kernel.
 fn op_key(op: &dyn Op) -> String {
     let name = op.name();
     let products = ["OptMatMul", "PackedLinear", "UnfoldConv", "BatchedProduct"];
