@@ -19,7 +19,7 @@ use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
 
 use super::batched::{BatchedProduct, as_batched};
-use super::gemm::{self, MR, NR, pack};
+use super::gemm::{self, MR, pack};
 use super::softmax::{RowSoftmax, SumOrder, softmax_block};
 
 /// `softmax(scores) . v` with `scores = q . k` over the last axis, per batch (head).
@@ -74,30 +74,17 @@ impl EvalOp for FusedAttention {
         let ldc = p.m.c;
         let batches: usize = s.batch.iter().map(|b| b.len).product();
         for index in 0..batches {
-            let (mut rest, mut off) = (index, [0usize; 4]);
-            for (bs, bp) in s.batch.iter().zip(&p.batch).rev() {
-                let i = rest % bs.len;
-                rest /= bs.len;
-                off[0] += i * bs.a;
-                off[1] += i * bs.b;
-                off[2] += i * bp.b;
-                off[3] += i * bp.c;
-            }
-            let (q, k, vb) = (&q_all[off[0]..], &k_all[off[1]..], &vs[off[2]..]);
-            let kt_len = gemm::panels(keys, NR) * NR * d;
-            let v_len = gemm::panels(dv, NR) * NR * keys;
-            let c_len = (m - 1) * ldc + dv;
-            let c = &mut c_all[off[3]..][..c_len];
-            let done = pack::with_scratch(kt_len + v_len, |scratch| {
+            // The scores' batch offsets in Q and K, the values' in V and the output (the
+            // two products' batch axes are the same, checked at the rewrite).
+            let [oq, ok, _] = s.offsets(index);
+            let [_, ov, oc] = p.offsets(index);
+            let q = &q_all[oq..];
+            let kt_len = s.b_len();
+            let c = &mut c_all[oc..][..p.c_len()];
+            let done = pack::with_scratch(kt_len + p.b_len(), |scratch| {
                 let (kt, vp) = scratch.split_at_mut(kt_len);
-                gemm::on_threads(true, kt, NR * d, |j, panel| {
-                    pack::pack_b_panel_strided(k, (d, keys), (s.k.b, s.n.b), j, panel);
-                    true
-                });
-                gemm::on_threads(true, vp, NR * keys, |j, panel| {
-                    pack::pack_b_panel_strided(vb, (keys, dv), (p.k.b, p.n.b), j, panel);
-                    true
-                });
+                s.pack_b(true, &k_all[ok..], kt);
+                p.pack_b(true, &vs[ov..], vp);
                 // One task per query panel: its rows of the output.
                 gemm::on_threads(true, c, MR * ldc, |i, rows| {
                     let here = MR.min(m - i * MR);

@@ -132,7 +132,7 @@ impl EvalOp for BatchedProduct {
 
 impl BatchedProduct {
     /// Offsets of batch `index` in A, B and the output (last batch axis fastest).
-    fn offsets(&self, index: usize) -> [usize; 3] {
+    pub(crate) fn offsets(&self, index: usize) -> [usize; 3] {
         let (mut rest, mut off) = (index, [0usize; 3]);
         for ax in self.batch.iter().rev() {
             let i = rest % ax.len;
@@ -145,8 +145,36 @@ impl BatchedProduct {
     }
 
     /// Values one batch's C spans in the output.
-    fn c_len(&self) -> usize {
+    pub(crate) fn c_len(&self) -> usize {
         (self.m.len - 1) * self.m.c + self.n.len
+    }
+
+    /// Scratch values [`Self::pack_a`] fills.
+    pub(crate) fn a_len(&self) -> usize {
+        gemm::panels(self.m.len, MR) * MR * self.k.len
+    }
+
+    /// Scratch values [`Self::pack_b`] fills.
+    pub(crate) fn b_len(&self) -> usize {
+        gemm::panels(self.n.len, NR) * NR * self.k.len
+    }
+
+    /// One batch's A read from `src` (at its offset) into `dst` ([`Self::a_len`] values).
+    pub(crate) fn pack_a(&self, parallel: bool, src: &[f32], dst: &mut [f32]) {
+        let (m, k) = (self.m.len, self.k.len);
+        gemm::on_threads(parallel, dst, MR * k, |i, panel| {
+            pack::pack_a_panel_strided(src, (m, k), (self.m.a, self.k.a), i, panel);
+            true
+        });
+    }
+
+    /// One batch's B read from `src` (at its offset) into `dst` ([`Self::b_len`] values).
+    pub(crate) fn pack_b(&self, parallel: bool, src: &[f32], dst: &mut [f32]) {
+        let (k, n) = (self.k.len, self.n.len);
+        gemm::on_threads(parallel, dst, NR * k, |j, panel| {
+            pack::pack_b_panel_strided(src, (k, n), (self.k.b, self.n.b), j, panel);
+            true
+        });
     }
 
     /// One batch: both operands packed from `a_src` and `b_src`, the product into `c` (rows
@@ -154,18 +182,11 @@ impl BatchedProduct {
     fn one(&self, a_src: &[f32], b_src: &[f32], c: &mut [f32], ldc: usize) -> bool {
         let (m, n, k) = (self.m.len, self.n.len, self.k.len);
         let parallel = gemm::worth_threads(m * n * k);
-        let a_len = gemm::panels(m, MR) * MR * k;
-        let b_len = gemm::panels(n, NR) * NR * k;
-        pack::with_scratch(a_len + b_len, |scratch| {
+        let a_len = self.a_len();
+        pack::with_scratch(a_len + self.b_len(), |scratch| {
             let (a, b) = scratch.split_at_mut(a_len);
-            gemm::on_threads(parallel, a, MR * k, |i, panel| {
-                pack::pack_a_panel_strided(a_src, (m, k), (self.m.a, self.k.a), i, panel);
-                true
-            });
-            gemm::on_threads(parallel, b, NR * k, |j, panel| {
-                pack::pack_b_panel_strided(b_src, (k, n), (self.k.b, self.n.b), j, panel);
-                true
-            });
+            self.pack_a(parallel, a_src, a);
+            self.pack_b(parallel, b_src, b);
             let ops = gemm::Operands {
                 a,
                 b: gemm::BSource::Packed(b),
