@@ -30,6 +30,7 @@ pub mod conv_unfold;
 pub mod fold;
 pub mod gemm;
 pub mod linear;
+pub mod max_pool;
 pub mod natural_consts;
 pub mod rewrite;
 pub mod softmax;

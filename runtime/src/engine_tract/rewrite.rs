@@ -4,7 +4,7 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]), on the AVX-512 kernel tier the convolutions of 64 channels or more
+//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), on the AVX-512 kernel tier the convolutions of 64 channels or more
 //! ([`conv_unfold`]) and the linear layers ([`linear`]) on the native product ([`gemm`]), and
 //! (on the other tiers) the wide image stems, planned with im2col where tract would run them
 //! direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
@@ -18,7 +18,7 @@ use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
     attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear,
-    natural_consts, softmax, weighted_sum,
+    max_pool, natural_consts, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -34,6 +34,8 @@ pub struct Rewrites {
     /// Softmaxes run as [`softmax::RowSoftmax`] (0 on a host whose softmax kernel it does not
     /// model).
     pub row_softmaxes: usize,
+    /// Max poolings run as [`max_pool::MaxPool2d`] (the ResNet stems'; every tier).
+    pub max_pools: usize,
     /// Convolutions of 64 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
     pub unfolded_convs: usize,
@@ -63,6 +65,7 @@ pub(crate) enum Pass {
     WeightedSums,
     BilinearSamplers,
     RowSoftmaxes,
+    MaxPools,
     UnfoldConvs,
     NativeLinears,
     FusedAttention,
@@ -95,6 +98,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::RowSoftmaxes) {
         (model, done.row_softmaxes) = softmax::fuse_softmaxes(model)?;
+    }
+    if runs(Pass::MaxPools) {
+        (model, done.max_pools) = max_pool::native_max_pools(model)?;
     }
     // The native product has an AVX-512 kernel only; elsewhere tract's products stay.
     let native = gemm::available();

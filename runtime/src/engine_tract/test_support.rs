@@ -96,7 +96,11 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
         ..Rewrites::default()
     };
     match stage {
-        Stage::ImageEncoder => none,
+        // The ResNet stem's max pooling, on every tier.
+        Stage::ImageEncoder => Rewrites {
+            max_pools: 1,
+            ..none
+        },
         Stage::BevEncoder => none,
         // One deformable self-attention sampler; softmaxes of its sampling and GKT weights.
         Stage::BevQuery => Rewrites {
