@@ -46,50 +46,6 @@ pub struct Unfold {
 }
 
 impl Unfold {
-    /// Patch row `r` (input channel, kernel row, kernel column) of the input planes `xs` for
-    /// the output pixels `p0..p0 + out.len()` into `out`, zeros in the padding and past the
-    /// last pixel.
-    fn row_range(&self, xs: &[f32], r: usize, p0: usize, out: &mut [f32]) {
-        out.fill(0.0);
-        let [_, h, w] = self.input;
-        let [kh, kw] = self.kernel;
-        let [oh, ow] = self.output;
-        let (kx, ky, c) = (r % kw, (r / kw) % kh, r / (kw * kh));
-        let plane = &xs[c * h * w..][..h * w];
-        let p1 = (p0 + out.len()).min(oh * ow);
-        let [sy, sx] = self.strides;
-        let [dy, dx] = self.dilations;
-        let [pt, pl] = self.pad_before;
-        let off = (kx * dx) as isize - pl as isize;
-        for oy in p0 / ow..p1.div_ceil(ow) {
-            let iy = (oy * sy + ky * dy) as isize - pt as isize;
-            if iy < 0 || iy >= h as isize {
-                continue;
-            }
-            let src = &plane[iy as usize * w..][..w];
-            let ox0 = p0.max(oy * ow) - oy * ow;
-            let ox1 = p1.min((oy + 1) * ow) - oy * ow;
-            // d[i] is output column ox0 + i.
-            let d = &mut out[oy * ow + ox0 - p0..][..ox1 - ox0];
-            if sx == 1 {
-                // Contiguous: the run of ox whose ix = ox + off is inside the row.
-                let lo = ox0.max((-off).max(0) as usize);
-                let hi = ox1.min((w as isize - off).max(0) as usize);
-                if lo < hi {
-                    let s = (lo as isize + off) as usize;
-                    d[lo - ox0..hi - ox0].copy_from_slice(&src[s..s + (hi - lo)]);
-                }
-            } else {
-                for (i, v) in d.iter_mut().enumerate() {
-                    let ix = ((ox0 + i) * sx) as isize + off;
-                    if ix >= 0 && ix < w as isize {
-                        *v = src[ix as usize];
-                    }
-                }
-            }
-        }
-    }
-
     /// Depth rows `pc..pc + kc` of B panels `j..` (output pixels `j * NR..`) into `dst`, one
     /// panel after the other, [`NR`] values a row ([`gemm::BSource::Fill`]).
     fn fill_panels(&self, xs: &[f32], (j, pc, kc): (usize, usize, usize), dst: &mut [f32]) {
@@ -97,10 +53,70 @@ impl Unfold {
         let panels = dst.len() / (kc * NR);
         let row = &mut row[..panels * NR];
         for r in 0..kc {
-            self.row_range(xs, pc + r, j * NR, row);
+            self.patch_row(xs, pc + r, j * NR, row);
             for (jl, piece) in row.chunks_exact(NR).enumerate() {
                 dst[(jl * kc + r) * NR..][..NR].copy_from_slice(piece);
             }
+        }
+    }
+
+    /// Patch row `r` (input channel, kernel row, kernel column) of the input planes `xs` for
+    /// the output pixels `p0..p0 + out.len()` into `out`, each value written once: zeros in the
+    /// padding and past the last pixel.
+    fn patch_row(&self, xs: &[f32], r: usize, p0: usize, out: &mut [f32]) {
+        let [_, h, w] = self.input;
+        let [kh, kw] = self.kernel;
+        let [oh, ow] = self.output;
+        let (kx, ky, c) = (r % kw, (r / kw) % kh, r / (kw * kh));
+        let plane = &xs[c * h * w..][..h * w];
+        let [sy, sx] = self.strides;
+        let [dy, dx] = self.dilations;
+        let [pt, pl] = self.pad_before;
+        // Output columns whose input column ox * sx + off is inside the row: lo..hi.
+        let off = (kx * dx) as isize - pl as isize;
+        let lo = if off >= 0 {
+            0
+        } else {
+            off.unsigned_abs().div_ceil(sx)
+        };
+        let hi = if off >= w as isize {
+            0
+        } else {
+            ((w as isize - 1 - off) as usize / sx + 1).min(ow)
+        };
+        let end = p0 + out.len();
+        let mut p = p0;
+        while p < end {
+            let d = &mut out[p - p0..];
+            if p >= oh * ow {
+                d.fill(0.0);
+                break;
+            }
+            let (oy, ox0) = (p / ow, p % ow);
+            let ox1 = ow.min(ox0 + (end - p));
+            let d = &mut d[..ox1 - ox0];
+            let iy = (oy * sy + ky * dy) as isize - pt as isize;
+            if iy < 0 || iy >= h as isize {
+                d.fill(0.0);
+            } else {
+                let a = lo.clamp(ox0, ox1);
+                let b = hi.clamp(a, ox1);
+                let (head, rest) = d.split_at_mut(a - ox0);
+                let (body, tail) = rest.split_at_mut(b - a);
+                head.fill(0.0);
+                tail.fill(0.0);
+                if a < b {
+                    let first = iy as usize * w + (a as isize * sx as isize + off) as usize;
+                    if sx == 1 {
+                        body.copy_from_slice(&plane[first..][..b - a]);
+                    } else {
+                        for (v, s) in body.iter_mut().zip(plane[first..].iter().step_by(sx)) {
+                            *v = *s;
+                        }
+                    }
+                }
+            }
+            p += ox1 - ox0;
         }
     }
 }
@@ -432,15 +448,18 @@ mod tests {
             output: [3, 4],
         };
         let xs: Vec<f32> = (1..=12).map(|v| v as f32).collect();
-        let mut row = vec![f32::NAN; 16];
-        unfold.row_range(&xs, 0, 0, &mut row);
+        let row_from = |p0: usize, len: usize| {
+            let mut row = vec![f32::NAN; len];
+            unfold.patch_row(&xs, 0, p0, &mut row);
+            row
+        };
+        let row = row_from(0, 16);
         let want = [
             0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 0.0, 5.0, 6.0, 7.0, 0.0, 0.0, 0.0, 0.0,
         ];
         assert_eq!(row, want);
         // The same row from pixel 5 on, past the last pixel zero.
-        let mut part = vec![f32::NAN; 9];
-        unfold.row_range(&xs, 0, 5, &mut part);
+        let part = row_from(5, 9);
         assert_eq!(&part[..7], &want[5..12]);
         assert!(part[7..].iter().all(|&v| v == 0.0));
     }
