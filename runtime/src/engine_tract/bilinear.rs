@@ -142,9 +142,14 @@ impl EvalOp for BilinearCornerSum {
         if query_len > 0 {
             let chunk_len = QUERIES_PER_TASK * query_len;
             match current_tract_executor() {
-                Executor::MultiThread(pool) => {
-                    pool.install(|| out.par_chunks_mut(chunk_len).enumerate().try_for_each(task))?
-                }
+                Executor::MultiThread(pool) => pool.install(|| {
+                    out.par_chunks_mut(chunk_len)
+                        .enumerate()
+                        .try_for_each(|(i, chunk)| {
+                            super::vector_state::clear_upper();
+                            task((i, chunk))
+                        })
+                })?,
                 // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
                 _ => out.chunks_mut(chunk_len).enumerate().try_for_each(task)?,
             }

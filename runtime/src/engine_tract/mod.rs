@@ -36,6 +36,7 @@ pub mod rewrite;
 pub mod softmax;
 #[cfg(test)]
 mod test_support;
+pub mod vector_state;
 pub mod weighted_sum;
 
 use tract_nnef::framework::Nnef;
@@ -220,7 +221,8 @@ impl StageRunner {
             .map(|t| TValue::from_const(Arc::clone(t)))
             .collect();
         let state = &mut self.state;
-        let results = match multithread_tract_scope(executor.clone(), || state.run(inputs)) {
+        let run = || state.run_plan_with_eval(inputs, vector_state::eval_node);
+        let results = match multithread_tract_scope(executor.clone(), run) {
             Ok(results) => results,
             Err(e) => {
                 self.last_error = Some(format!("{e:#}"));
@@ -530,7 +532,7 @@ impl TractEngine {
         let run = multithread_tract_scope(executor.clone(), || {
             state.run_plan_with_eval(inputs, |ctx, op_state, node, node_inputs| {
                 let t = std::time::Instant::now();
-                let out = tract_nnef::tract_core::plan::eval(ctx, op_state, node, node_inputs);
+                let out = vector_state::eval_node(ctx, op_state, node, node_inputs);
                 let ms = t.elapsed().as_secs_f64() * 1e3;
                 let name = op_key(node.op());
                 match totals.iter_mut().find(|(n, _)| *n == name) {

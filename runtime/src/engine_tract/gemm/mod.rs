@@ -299,7 +299,12 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, per_task: usi
 /// task returned it.
 pub fn on_pool(tasks: usize, task: impl Fn(usize) -> bool + Sync + Send) -> bool {
     match current_tract_executor() {
-        Executor::MultiThread(pool) => pool.install(|| (0..tasks).into_par_iter().all(&task)),
+        Executor::MultiThread(pool) => pool.install(|| {
+            (0..tasks).into_par_iter().all(|t| {
+                super::vector_state::clear_upper();
+                task(t)
+            })
+        }),
         // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
         _ => (0..tasks).all(task),
     }
@@ -409,9 +414,10 @@ where
     let chunk = chunk.max(1);
     match current_tract_executor() {
         Executor::MultiThread(pool) if parallel => pool.install(|| {
-            data.par_chunks_mut(chunk)
-                .enumerate()
-                .all(|(i, c)| task(i, c))
+            data.par_chunks_mut(chunk).enumerate().all(|(i, c)| {
+                super::vector_state::clear_upper();
+                task(i, c)
+            })
         }),
         // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
         _ => data.chunks_mut(chunk).enumerate().all(|(i, c)| task(i, c)),
