@@ -1,4 +1,4 @@
-//! The convolutions of 64 output channels or more as the native product of their weights and
+//! The convolutions of 8 output channels or more as the native product of their weights and
 //! their input's patches.
 //!
 //! tract 0.23.9 runs these with lazy im2col (the product gathers its image operand panel by
@@ -10,21 +10,25 @@
 //! in the padding) gathered straight into the product's packed blocks as it goes (no `[k, n]`
 //! matrix is ever laid out: the scratch is one block of [`gemm::KC`] x 1,024 values), the bias
 //! added to the finished sums. Narrower convolutions keep tract's plan (the product's 12-row
-//! tiles would be mostly empty), and so do those below 64 outputs that tract runs with its
-//! direct spatial kernel (`test`'s 8-channel stem: another summation order, and faster there);
-//! a 1x1 convolution is a matmul after decluttering ([`super::linear`]).
+//! tiles would be mostly empty); a 1x1 convolution is a matmul after decluttering
+//! ([`super::linear`]).
 //!
-//! Bit for bit: the product sums `k` in the order of tract's own im2col and of the OIHW weights
-//! (input channel, then kernel row, then kernel column) in one fused multiply-add chain from
-//! zero, and adds the bias after the sum, as tract's convolution does, whichever of its paths
-//! it takes; this module's tests check the bits against tract's plan of the same convolution
-//! and of every stage of the committed default bundle. On the AVX-512 tier only ([`gemm`]).
+//! Bit for bit with tract's im2col: the product sums `k` in the order of tract's own im2col and
+//! of the OIHW weights (input channel, then kernel row, then kernel column) in one fused
+//! multiply-add chain from zero, and adds the bias after the sum, as tract's convolution does
+//! on its im2col paths; this module's tests check the bits against tract's plan of the same
+//! convolution and of every stage of the committed default bundle. The one convolution tract
+//! would run otherwise, `test`'s 8-channel stem (tract's direct spatial kernel, which sums in
+//! another order), now runs here too: 1.1-1.3 ms against tract's 2.9 (its image encoder 4.6 ->
+//! 2.7 ms, onnxruntime's 2.95), so on the AVX-512 tier the default bundle's pinned digests
+//! (the demo drive's, the C example's) are those of tract's im2col order; the tests compare
+//! that stem against tract's plan with its direct spatial path off
+//! (`TRACT_DISABLE_DIRECT_SPATIAL`). On the AVX-512 tier only ([`gemm`]).
 
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::Conv;
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
-use super::conv_direct;
 use super::gemm::{self, NR, PackedA};
 
 /// The patches of a 2-D convolution of `[1, C, H, W]`, as a `[C * kh * kw, OH * OW]` matrix
@@ -109,6 +113,18 @@ impl Unfold {
                     let first = iy as usize * w + (a as isize * sx as isize + off) as usize;
                     if sx == 1 {
                         body.copy_from_slice(&plane[first..][..b - a]);
+                    } else if sx == 2 {
+                        // Pairs, the first of each: a shape the compiler vectorises (two loads
+                        // and a permute for 16 values), where a stepped iterator went value by
+                        // value (the stems' gathering, ~1 ns a value).
+                        let src = &plane[first..][..2 * (b - a) - 1];
+                        let (pairs, last) = body.split_at_mut(src.len() / 2);
+                        for (v, pair) in pairs.iter_mut().zip(src.chunks_exact(2)) {
+                            *v = pair[0];
+                        }
+                        if let Some(v) = last.first_mut() {
+                            *v = src[src.len() - 1];
+                        }
                     } else {
                         for (v, s) in body.iter_mut().zip(plane[first..].iter().step_by(sx)) {
                             *v = *s;
@@ -242,8 +258,9 @@ impl TypedOp for UnfoldConv {
 }
 
 /// Output channels from which a convolution is unfolded (below, the product's 12-row tiles are
-/// mostly empty and tract's plan is kept).
-pub const MIN_OUTPUT_CHANNELS: usize = 16;
+/// mostly empty and tract's plan is kept). `test`'s 8-channel convolutions, two thirds of a
+/// tile: 0.3 ms against tract's 1.1.
+pub const MIN_OUTPUT_CHANNELS: usize = 8;
 
 /// Rewrite every f32 convolution of a decluttered `model` with one group, NCHW over two
 /// spatial axes (or CHW, the batch axis decluttered away), batch 1, constant weights and bias and at least [`MIN_OUTPUT_CHANNELS`]
@@ -281,15 +298,6 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         let (Some(kernel), Some(bias)) = (facts[1].konst.clone(), facts[2].konst.clone()) else {
             continue;
         };
-        // Below conv_direct's width tract's direct spatial kernel is kept (it sums in another
-        // order, and beats the product on `test`'s 8-channel stem).
-        if conv.output_channels() < conv_direct::MIN_OUTPUT_CHANNELS
-            && node.op.codegen(&model, node)?.is_some_and(|patch| {
-                conv_direct::has_op(&patch.model, conv_direct::DIRECT_SPATIAL_OP)
-            })
-        {
-            continue;
-        }
         let batch_axis = conv.pool_spec.data_format == DataFormat::NCHW;
         let (ci, h, w) = match *xs {
             [1, c, h, w] if batch_axis => (c, h, w),
@@ -352,10 +360,14 @@ mod tests {
     //! (rewritten), on narrow and wide ones (left alone), and on every stage of the committed
     //! default bundle.
     use super::*;
+    use crate::engine::Stage;
+    use crate::engine_tract::conv_direct;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
-        ConvShape, assert_pass_keeps_stage_bits, bits, conv_model, run_optimized,
+        ConvShape, assert_same_bits, bits, committed_stage_before, conv_model, inputs_of,
+        run_optimized,
     };
+    use tract_nnef::tract_core::tract_data::knobs::KnobScope;
 
     #[test]
     fn resnet_shapes_run_unfolded_with_tracts_bits() {
@@ -401,16 +413,39 @@ mod tests {
     }
 
     #[test]
-    fn narrow_and_direct_spatial_convolutions_keep_tracts_plan() {
-        // 8 outputs: below the product's useful m; a 16-channel stem tract runs direct spatial.
+    fn narrow_convolutions_keep_tracts_plan() {
+        // 4 outputs: a third of the product's 12-row tiles.
+        let (model, _) = conv_model(&ConvShape::new(64, 4, [24, 40], 3, 1, 1));
+        let (same, n) = unfold_convs(model).unwrap();
+        assert_eq!(n, 0);
+        assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
+    }
+
+    /// tract's direct spatial path off, as [`super::conv_direct`] scopes it: tract's im2col.
+    fn without_direct_spatial<R>(f: impl FnOnce() -> R) -> R {
+        KnobScope::new([("TRACT_DISABLE_DIRECT_SPATIAL", "1")])
+            .expect("knob")
+            .enter(f)
+    }
+
+    #[test]
+    fn direct_spatial_stems_run_unfolded_with_tracts_im2col_bits() {
+        if !gemm::available() {
+            return;
+        }
+        // `test`'s 8-channel stem and a 16-channel one, both run direct spatial by tract.
         for s in [
-            ConvShape::new(64, 8, [24, 40], 3, 1, 1),
+            ConvShape::new(3, 8, [180, 320], 7, 2, 3),
             ConvShape::new(3, 16, [256, 320], 7, 2, 3),
         ] {
-            let (model, _) = conv_model(&s);
-            let (same, n) = unfold_convs(model).unwrap();
-            assert_eq!(n, 0, "{} -> {}", s.ci, s.co);
-            assert!(same.nodes().iter().any(|n| n.op_is::<Conv>()));
+            let (model, inputs) = conv_model(&s);
+            let direct = model.clone().into_optimized().unwrap();
+            assert!(conv_direct::has_op(&direct, conv_direct::DIRECT_SPATIAL_OP));
+            let (unfolded, n) = unfold_convs(model.clone()).unwrap();
+            assert_eq!(n, 1, "{} -> {}", s.ci, s.co);
+            let want = without_direct_spatial(|| run_optimized(model, &inputs));
+            let got = run_optimized(unfolded, &inputs);
+            assert_eq!(bits(&got[0]), bits(&want[0]), "{} -> {}", s.ci, s.co);
         }
     }
 
@@ -466,6 +501,15 @@ mod tests {
 
     #[test]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
-        assert_pass_keeps_stage_bits(Pass::UnfoldConvs, unfold_convs);
+        // Every stage as tract's plan computes it with im2col (`test`'s stem is direct spatial
+        // in tract's own plan; every other convolution takes im2col anyway).
+        for stage in Stage::ALL {
+            let plain = committed_stage_before(stage, Pass::UnfoldConvs);
+            let inputs = inputs_of(&plain);
+            let (unfolded, _) = unfold_convs(plain.clone()).expect("rewrite");
+            let want = without_direct_spatial(|| run_optimized(plain, &inputs));
+            let got = run_optimized(unfolded, &inputs);
+            assert_same_bits(stage, &want, &got);
+        }
     }
 }

@@ -85,9 +85,9 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // Products of two activations: the Swin windows' attention where a window has 8 tokens or
     // more, the decoder's live self-attention scores (its 8-wide weighted values stay tract's).
     let batched = if avx512 { [0, 0, 0, 4, 1] } else { [0; 5] };
-    // Convolutions of 16 channels or more: the tiny ResNet's but its direct spatial stem, the
-    // satellite FPN's, the decoder's input projection.
-    let convs = if avx512 { [7, 0, 0, 3, 1] } else { [0; 5] };
+    // Convolutions of 8 channels or more: the tiny ResNet's (its stem too), the Swin's patch
+    // embedding and the satellite FPN's, the decoder's input projection.
+    let convs = if avx512 { [10, 0, 0, 4, 1] } else { [0; 5] };
     let none = Rewrites {
         broadcast_binaries: broadcast[stage as usize],
         native_linears: linears[stage as usize],
