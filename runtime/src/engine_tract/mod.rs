@@ -32,6 +32,7 @@ pub mod gemm;
 pub mod linear;
 pub mod max_pool;
 pub mod natural_consts;
+pub mod pointwise;
 pub mod rewrite;
 pub mod softmax;
 #[cfg(test)]
@@ -655,7 +656,13 @@ impl Engine for TractEngine {
 /// the native products describe themselves the same way, with `native` for the kernel.
 fn op_key(op: &dyn Op) -> String {
     let name = op.name();
-    let products = ["OptMatMul", "PackedLinear", "UnfoldConv", "BatchedProduct"];
+    let products = [
+        "OptMatMul",
+        "PackedLinear",
+        "UnfoldConv",
+        "BatchedProduct",
+        "PointwiseConv",
+    ];
     if !products.contains(&&*name) {
         return name.into_owned();
     }

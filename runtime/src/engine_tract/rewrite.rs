@@ -5,7 +5,8 @@
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
 //! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), on the AVX-512 kernel tier the convolutions of 64 channels or more
-//! ([`conv_unfold`]) and the linear layers ([`linear`]) on the native product ([`gemm`]), and
+//! ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of channel-first
+//! maps ([`pointwise`]) on the native product ([`gemm`]), and
 //! (on the other tiers) the wide image stems, planned with im2col where tract would run them
 //! direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
 //! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
@@ -18,7 +19,7 @@ use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
     attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear,
-    max_pool, natural_consts, softmax, weighted_sum,
+    max_pool, natural_consts, pointwise, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -42,6 +43,9 @@ pub struct Rewrites {
     /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on the
     /// AVX-512 tier only).
     pub native_linears: usize,
+    /// 1x1 convolutions of channel-first maps run as [`pointwise::PointwiseConv`]
+    /// ([`pointwise::native_pointwise_convs`]; on the AVX-512 tier only).
+    pub pointwise_convs: usize,
     /// Products of two activations (attention) run as [`batched::BatchedProduct`]
     /// ([`batched::native_batched`]; on the AVX-512 tier only).
     pub native_batched: usize,
@@ -68,6 +72,7 @@ pub(crate) enum Pass {
     MaxPools,
     UnfoldConvs,
     NativeLinears,
+    PointwiseConvs,
     FusedAttention,
     NativeBatched,
     Im2colStems,
@@ -109,6 +114,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::NativeLinears) && native {
         (model, done.native_linears) = linear::native_linears(model)?;
+    }
+    if runs(Pass::PointwiseConvs) && native {
+        (model, done.pointwise_convs) = pointwise::native_pointwise_convs(model)?;
     }
     if runs(Pass::FusedAttention) && native {
         (model, done.fused_attentions) = attention::fuse_attention(model)?;

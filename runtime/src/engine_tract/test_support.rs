@@ -82,6 +82,9 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // bev_query's value/offset/weight/output projections, bev_encoder's, the Swin blocks' and
     // the decoder's (per stage, `Stage::ALL` order).
     let linears = if avx512 { [1, 6, 3, 18, 19] } else { [0; 5] };
+    // 1x1 convolutions of channel-first maps: the tiny ResNet's downsampling projections and
+    // the image neck's lateral; six in the satellite encoder (its FPN's channel-first maps).
+    let pointwise = if avx512 { [4, 0, 0, 6, 0] } else { [0; 5] };
     // Products of two activations: the Swin windows' attention where a window has 8 tokens or
     // more, the decoder's live self-attention scores (its 8-wide weighted values stay tract's).
     let batched = if avx512 { [0, 0, 0, 4, 1] } else { [0; 5] };
@@ -91,6 +94,7 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     let none = Rewrites {
         broadcast_binaries: broadcast[stage as usize],
         native_linears: linears[stage as usize],
+        pointwise_convs: pointwise[stage as usize],
         native_batched: batched[stage as usize],
         unfolded_convs: convs[stage as usize],
         ..Rewrites::default()

@@ -1,0 +1,385 @@
+//! The 1x1 convolutions of channel-first maps as the native product.
+//!
+//! After decluttering, a 1x1 convolution of a `[1, C, H, W]` (or `[C, H, W]`) map is an
+//! [`EinSum`] of constant weights `[C_out, C]` and the map, contracting its channel axis,
+//! usually followed by an `Add` of a constant bias `[C_out, 1, 1]`. [`super::linear`] takes
+//! products whose contracted axis is last (tokens x features); these contract the channel axis,
+//! so tract kept them: ResNet-50's bottleneck projections ran through tract's product at 28-60
+//! GFLOP/s (`paper`'s image encoder: half of its 876 ms, with 86 ms of tract packing the map)
+//! and the FPN laterals likewise. [`native_pointwise_convs`] rewrites each into one
+//! [`PointwiseConv`]: `C[o, p] = W[o, c] X[c, p]`, the weights packed once at load as the
+//! product's A, the map's channel rows copied into the product's B blocks as it goes, the bias
+//! added per row to the finished sums.
+//!
+//! Bit for bit: each output is one fused multiply-add chain over the channels ascending from
+//! zero, the bias added after, as tract's product computes it (this module's tests, against
+//! tract's plan of 1x1 convolutions built here and of every stage of the committed default
+//! bundle). Maps of fewer than [`MIN_PIXELS`] pixels keep tract's plan (its matrix-vector
+//! kernels sum in another order). On the AVX-512 tier only, as [`gemm`].
+
+use tract_nnef::internal::*;
+use tract_nnef::tract_core::ops::binary::TypedBinOp;
+use tract_nnef::tract_core::ops::einsum::EinSum;
+
+use super::conv_unfold::MIN_OUTPUT_CHANNELS;
+use super::gemm::{self, NR, PackedA};
+
+/// Pixels (columns of the product) from which a 1x1 convolution runs natively: one B panel.
+pub const MIN_PIXELS: usize = NR;
+
+/// `W [m, k] . X [k, n] (+ bias [m]) -> [m, n]` over a channel-first map (`k` channels of `n`
+/// pixels in, `m` out), `W` packed at load.
+#[derive(Clone, Debug)]
+pub struct PointwiseConv {
+    /// The map's shape (`[1.., k, spatial..]`).
+    pub input: TVec<usize>,
+    /// The output's shape (`[1.., m, spatial..]`).
+    pub output: TVec<usize>,
+    /// Output channels, input channels, pixels.
+    pub mkn: [usize; 3],
+    weights: Arc<PackedA>,
+    bias: Option<Arc<Vec<f32>>>,
+}
+
+impl PartialEq for PointwiseConv {
+    fn eq(&self, other: &Self) -> bool {
+        self.input == other.input
+            && self.output == other.output
+            && self.mkn == other.mkn
+            && Arc::ptr_eq(&self.weights, &other.weights)
+            && match (&self.bias, &other.bias) {
+                (None, None) => true,
+                (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+                _ => false,
+            }
+    }
+}
+impl Eq for PointwiseConv {}
+
+impl Op for PointwiseConv {
+    fn info(&self) -> TractResult<Vec<String>> {
+        let [m, k, n] = self.mkn;
+        Ok(vec![format!("Mult: m:{m} k:{k} n:{n} with [native]")])
+    }
+
+    fn name(&self) -> StaticName {
+        "PointwiseConv".into()
+    }
+    op_as_typed_op!();
+}
+
+impl EvalOp for PointwiseConv {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let x = args_1!(inputs);
+        ensure!(
+            x.shape() == &*self.input,
+            "PointwiseConv input {:?}, expected {:?}",
+            x.shape(),
+            self.input
+        );
+        let px = x.try_as_plain_ram()?;
+        let xs = px.as_slice::<f32>()?;
+        let [m, k, n] = self.mkn;
+        let mut out = gemm::output_tensor(&self.output)?;
+        let mut po = out.try_as_plain_ram_mut()?;
+        // B's rows are the map's channel rows: panel columns copied, zeros past the last pixel.
+        let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
+            for (jl, panel) in dst.chunks_exact_mut(kc * NR).enumerate() {
+                let col0 = (j + jl) * NR;
+                let cols = NR.min(n.saturating_sub(col0));
+                for (r, row) in panel.chunks_exact_mut(NR).enumerate() {
+                    row[..cols].copy_from_slice(&xs[(pc + r) * n + col0..][..cols]);
+                    row[cols..].fill(0.0);
+                }
+            }
+        };
+        let ops = gemm::Operands {
+            a: self.weights.as_slice(),
+            b: gemm::BSource::Fill(&fill),
+            m,
+            n,
+            k,
+            ldc: n,
+        };
+        let bias = match &self.bias {
+            Some(b) => gemm::Bias::PerRow(b),
+            None => gemm::Bias::None,
+        };
+        ensure!(
+            gemm::product(&ops, po.as_slice_mut::<f32>()?, bias),
+            "native product refused (AVX-512 missing or operands mis-sized)"
+        );
+        Ok(tvec!(out.into_tvalue()))
+    }
+}
+
+impl TypedOp for PointwiseConv {
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
+        Ok(tvec!(f32::fact(&*self.output)))
+    }
+
+    fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
+        let [m, k, n] = self.mkn;
+        Ok(tvec!((Cost::FMA(f32::datum_type()), (m * k * n).to_dim())))
+    }
+
+    as_op!();
+}
+
+/// What an [`EinSum`] node is when it is a 1x1 convolution of a channel-first map.
+struct Pointwise {
+    /// The map.
+    x: OutletId,
+    input: TVec<usize>,
+    output: TVec<usize>,
+    /// The channel axis of the map.
+    x_channel: usize,
+    /// The channel axis of the output.
+    channel: usize,
+    /// The weights as `[m, k]`, row-major.
+    w: Tensor,
+}
+
+/// The node `id` as a 1x1 convolution: an f32 [`EinSum`] of a map and a constant rank-2
+/// matrix, contracting one map axis (the channels) against the matrix, the matrix's other axis
+/// the output's channels, the map's axes after its channels kept in order after the output's,
+/// every other axis of length 1 (tract's decluttered 1x1 convolutions add or drop the batch
+/// axis: `IHW,OI->NOHW`, `NIHW,OI->OHW`).
+fn as_pointwise(model: &TypedModel, id: usize) -> TractResult<Option<Pointwise>> {
+    let node = model.node(id);
+    let Some(es) = node.op_as::<EinSum>() else {
+        return Ok(None);
+    };
+    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let facts = model.node_input_facts(id)?;
+    let Some(wi) = (0..2).find(|&i| facts[i].konst.is_some() && facts[i].rank() == 2) else {
+        return Ok(None);
+    };
+    let xi = 1 - wi;
+    let (xf, wf) = (facts[xi], facts[wi]);
+    let Some(input) = xf.shape.as_concrete().map(TVec::from) else {
+        return Ok(None);
+    };
+    if xf.konst.is_some()
+        || xf.datum_type != f32::datum_type()
+        || wf.datum_type != f32::datum_type()
+    {
+        return Ok(None);
+    }
+    let Some(output) = model.outlet_fact(OutletId::new(id, 0))?.shape.as_concrete() else {
+        return Ok(None);
+    };
+    let output: TVec<usize> = output.into();
+    let (mut k_at, mut m_at, mut kept) = (None, None, tvec![]);
+    for axis in es.axes.iter_all_axes() {
+        let (ix, iw, out) = (&axis.inputs[xi], &axis.inputs[wi], &axis.outputs[0]);
+        if ix.len() > 1 || iw.len() > 1 || out.len() > 1 {
+            return Ok(None);
+        }
+        match (ix.first(), iw.first(), out.first()) {
+            (Some(&px), Some(&pw), None) => k_at = Some((px, pw)),
+            (None, Some(&pw), Some(&po)) => m_at = Some((pw, po)),
+            (Some(&px), None, Some(&po)) => kept.push((px, po)),
+            // A unit axis of the map or of the output alone.
+            (Some(&px), None, None) if input[px] == 1 => {}
+            (None, None, Some(&po)) if output[po] == 1 => {}
+            _ => return Ok(None),
+        }
+    }
+    let (Some((x_channel, k_w)), Some((m_w, channel))) = (k_at, m_at) else {
+        return Ok(None);
+    };
+    let in_order = kept.iter().all(|&(px, po)| {
+        if px < x_channel || po < channel {
+            input[px] == 1 && po < channel
+        } else {
+            px - x_channel == po - channel
+        }
+    });
+    let spatial_kept = kept.iter().filter(|&&(px, _)| px > x_channel).count();
+    if k_w == m_w
+        || !in_order
+        || spatial_kept != input.len() - x_channel - 1
+        || output.len() - channel != input.len() - x_channel
+        || input[..x_channel].iter().any(|&d| d != 1)
+        || output[..channel].iter().any(|&d| d != 1)
+    {
+        return Ok(None);
+    }
+    let Some(konst) = wf.konst.as_ref() else {
+        return Ok(None);
+    };
+    let w = if m_w == 0 {
+        konst.clone().into_tensor()
+    } else {
+        konst.clone().into_tensor().permute_axes(&[1, 0])?
+    };
+    if output[channel] != w.shape()[0] {
+        return Ok(None);
+    }
+    Ok(Some(Pointwise {
+        x: node.inputs[xi],
+        input,
+        output,
+        x_channel,
+        channel,
+        w,
+    }))
+}
+
+/// The constant bias `[m]` (laid along the channel axis, every other axis of length 1, the
+/// output's rank) that the single `Add` successor of `id` adds, with that node.
+fn channel_bias_after(
+    model: &TypedModel,
+    id: usize,
+    output: &[usize],
+    channel: usize,
+) -> TractResult<Option<(usize, Vec<f32>)>> {
+    let outlet = &model.node(id).outputs[0];
+    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
+        return Ok(None);
+    }
+    let add_id = outlet.successors[0].node;
+    let add = model.node(add_id);
+    let is_add = add
+        .op_as::<TypedBinOp>()
+        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
+    if !is_add || add.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let other = if add.inputs[0].node == id { 1 } else { 0 };
+    let facts = model.node_input_facts(add_id)?;
+    let Some(b) = facts[other].konst.as_ref() else {
+        return Ok(None);
+    };
+    let shape = b.shape();
+    let bias_like = b.datum_type() == f32::datum_type()
+        && shape.len() == output.len()
+        && shape
+            .iter()
+            .enumerate()
+            .all(|(i, &d)| d == if i == channel { output[channel] } else { 1 });
+    let same_shape = model
+        .outlet_fact(OutletId::new(add_id, 0))?
+        .shape
+        .as_concrete()
+        == Some(output)
+        && facts[1 - other].shape.as_concrete() == Some(output);
+    if !bias_like || !same_shape {
+        return Ok(None);
+    }
+    let plain = b.try_as_plain_ram()?;
+    Ok(Some((add_id, plain.as_slice::<f32>()?.to_vec())))
+}
+
+/// Rewrite every 1x1 convolution of a decluttered `model` (see [`as_pointwise`]) with at least
+/// [`MIN_OUTPUT_CHANNELS`] outputs and [`MIN_PIXELS`] pixels into a [`PointwiseConv`], its bias
+/// `Add` taken in; returns the model and the number rewritten.
+///
+/// # Errors
+/// tract refusing a patch (an inconsistent model).
+pub fn native_pointwise_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
+    let mut done = 0;
+    for id in model.eval_order()? {
+        let Some(pw) = as_pointwise(&model, id)? else {
+            continue;
+        };
+        let (m, k) = (pw.w.shape()[0], pw.w.shape()[1]);
+        let n: usize = pw.input[pw.x_channel + 1..].iter().product();
+        if m < MIN_OUTPUT_CHANNELS || n < MIN_PIXELS || k == 0 || pw.input[pw.x_channel] != k {
+            continue;
+        }
+        let bias = channel_bias_after(&model, id, &pw.output, pw.channel)?;
+        let w_plain = pw.w.try_as_plain_ram()?;
+        let op = PointwiseConv {
+            input: pw.input.clone(),
+            output: pw.output.clone(),
+            mkn: [m, k, n],
+            weights: Arc::new(PackedA::from_row_major(w_plain.as_slice::<f32>()?, m, k)),
+            bias: bias.as_ref().map(|(_, b)| Arc::new(b.clone())),
+        };
+        let replaced = bias.map_or(id, |(add_id, _)| add_id);
+        let name = model.node(id).name.clone();
+        let mut patch = TypedModelPatch::default();
+        let x = patch.tap_model(&model, pw.x)?;
+        let y = patch.wire_node(format!("{name}.pointwise_conv"), op, &[x])?[0];
+        patch.shunt_outside(&model, OutletId::new(replaced, 0), y)?;
+        patch.apply(&mut model)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The pass against tract's own plan, bit for bit: on 1x1 convolutions built here (with
+    //! and without the batch axis, with a bias, wide and narrow maps) and on every stage of the
+    //! committed default bundle.
+    use super::*;
+    use crate::engine_tract::rewrite::Pass;
+    use crate::engine_tract::test_support::{
+        ConvShape, assert_pass_keeps_stage_bits, bits, conv_model, run_optimized,
+    };
+
+    #[test]
+    fn pointwise_convolutions_run_natively_with_tracts_bits() {
+        if !gemm::available() {
+            eprintln!("no AVX-512 here: the pass does not run on this CPU");
+            return;
+        }
+        for s in [
+            // ResNet-50's bottleneck projections (`paper`'s layer1, smaller maps), an FPN
+            // lateral without the batch axis, odd sizes off the tiles.
+            ConvShape::new(64, 256, [48, 80], 1, 1, 0),
+            ConvShape::new(256, 64, [24, 40], 1, 1, 0),
+            ConvShape {
+                batch: false,
+                ..ConvShape::new(96, 256, [50, 25], 1, 1, 0)
+            },
+            ConvShape::new(13, 21, [7, 9], 1, 1, 0),
+        ] {
+            let (model, inputs) = conv_model(&s);
+            let (native, n) = native_pointwise_convs(model.clone()).unwrap();
+            assert_eq!(n, 1, "{} -> {}", s.ci, s.co);
+            assert!(native.nodes().iter().any(|n| n.op_is::<PointwiseConv>()));
+            let want = run_optimized(model, &inputs);
+            let got = run_optimized(native, &inputs);
+            assert_eq!(got[0].shape(), want[0].shape(), "{} -> {}", s.ci, s.co);
+            assert_eq!(bits(&got[0]), bits(&want[0]), "{} -> {}", s.ci, s.co);
+        }
+    }
+
+    #[test]
+    fn small_maps_and_narrow_outputs_keep_tracts_plan() {
+        for s in [
+            ConvShape::new(64, 256, [4, 5], 1, 1, 0),
+            ConvShape::new(64, 4, [48, 80], 1, 1, 0),
+        ] {
+            let (model, _) = conv_model(&s);
+            assert_eq!(native_pointwise_convs(model).unwrap().1, 0);
+        }
+    }
+
+    #[test]
+    fn a_wrong_input_is_an_error_value() {
+        let op = PointwiseConv {
+            input: tvec![1, 2, 4, 8],
+            output: tvec![1, 3, 4, 8],
+            mkn: [3, 2, 32],
+            weights: Arc::new(PackedA::from_row_major(&[0.5; 6], 3, 2)),
+            bias: None,
+        };
+        let x = Tensor::zero::<f32>(&[1, 3, 4, 8]).unwrap();
+        assert!(op.eval_out_of_plan(tvec!(x.into_tvalue())).is_err());
+    }
+
+    #[test]
+    fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
+        assert_pass_keeps_stage_bits(Pass::PointwiseConvs, native_pointwise_convs);
+    }
+}
