@@ -20,6 +20,7 @@ use tract_nnef::internal::*;
 
 use super::batched::{BatchedProduct, as_batched};
 use super::gemm::{self, MR, pack};
+use super::rewrite::replace_with_op;
 use super::softmax::{RowSoftmax, SumOrder, softmax_block};
 
 /// `softmax(scores) . v` with `scores = q . k` over the last axis, per batch (head).
@@ -207,16 +208,15 @@ pub fn fuse_attention(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
         let Some((op, values_node, v)) = as_attention(&model, id)? else {
             continue;
         };
-        let name = model.node(id).name.clone();
+        let name = format!("{}.fused_attention", model.node(id).name);
         let inputs = model.node(id).inputs.clone();
-        let mut patch = TypedModelPatch::default();
-        let taps: TVec<OutletId> = [inputs[0], inputs[1], v]
-            .iter()
-            .map(|&o| patch.tap_model(&model, o))
-            .collect::<TractResult<_>>()?;
-        let y = patch.wire_node(format!("{name}.fused_attention"), op, &taps)?[0];
-        patch.shunt_outside(&model, OutletId::new(values_node, 0), y)?;
-        patch.apply(&mut model)?;
+        replace_with_op(
+            &mut model,
+            &[inputs[0], inputs[1], v],
+            values_node,
+            name,
+            op,
+        )?;
         done += 1;
     }
     Ok((model, done))

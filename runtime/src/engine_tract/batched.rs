@@ -342,7 +342,9 @@ mod tests {
     //! default bundle.
     use super::*;
     use crate::engine_tract::rewrite::Pass;
-    use crate::engine_tract::test_support::{assert_pass_keeps_stage_bits, bits, run_optimized};
+    use crate::engine_tract::test_support::{
+        assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized,
+    };
 
     fn values(len: usize, seed: usize) -> Vec<f32> {
         (0..len)
@@ -411,16 +413,7 @@ mod tests {
         let (model, inputs) = product_model("abmk,abkn->ambn", &[8, 4, 49, 49], &[8, 4, 49, 32]);
         let want = run_optimized(model.clone(), &inputs);
         let native = native_batched(model).unwrap().0;
-        let pool = Arc::new(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(2)
-                .build()
-                .unwrap(),
-        );
-        let got = tract_linalg::multithread::multithread_tract_scope(
-            tract_linalg::multithread::Executor::MultiThread(pool),
-            || run_optimized(native, &inputs),
-        );
+        let got = on_two_threads(|| run_optimized(native, &inputs));
         assert_eq!(bits(&got[0]), bits(&want[0]));
     }
 

@@ -26,10 +26,11 @@
 //! (`TRACT_DISABLE_DIRECT_SPATIAL`). On the AVX-512 tier only ([`gemm`]).
 
 use tract_nnef::internal::*;
-use tract_nnef::tract_core::ops::cnn::Conv;
+use tract_nnef::tract_core::ops::cnn::{Conv, PoolSpec};
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
 use super::gemm::{self, NR, PackedA};
+use super::rewrite::replace_with_op;
 
 /// The patches of a 2-D convolution of `[1, C, H, W]`, as a `[C * kh * kw, OH * OW]` matrix
 /// would hold them: row `(c * kh + ky) * kw + kx`, zeros where a tap falls in the padding.
@@ -50,6 +51,25 @@ pub struct Unfold {
 }
 
 impl Unfold {
+    /// The windows of a 2-D `spec` over a `[c, h, w]` input (a convolution's or a pooling's);
+    /// `None` for another rank or an empty output.
+    pub fn of_pool(spec: &PoolSpec, [c, h, w]: [usize; 3]) -> Option<Self> {
+        if spec.kernel_shape.len() != 2 {
+            return None;
+        }
+        let pads = spec.computed_padding(&[h, w]);
+        let (oh, ow) = (pads[0].convoluted, pads[1].convoluted);
+        let (strides, dil) = (spec.strides(), spec.dilations());
+        (oh * ow > 0).then(|| Self {
+            input: [c, h, w],
+            kernel: [spec.kernel_shape[0], spec.kernel_shape[1]],
+            strides: [strides[0], strides[1]],
+            dilations: [dil[0], dil[1]],
+            pad_before: [pads[0].pad_before, pads[1].pad_before],
+            output: [oh, ow],
+        })
+    }
+
     /// Depth rows `pc..pc + kc` of B panels `j..` (output pixels `j * NR..`) into `dst`, one
     /// panel after the other, [`NR`] values a row ([`gemm::BSource::Fill`]).
     fn fill_panels(&self, xs: &[f32], (j, pc, kc): (usize, usize, usize), dst: &mut [f32]) {
@@ -310,21 +330,9 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         if kernel.shape() != [co, ci, kh, kw] {
             continue;
         }
-        let pads = conv.pool_spec.computed_padding(&[h, w]);
-        let (oh, ow) = (pads[0].convoluted, pads[1].convoluted);
         let k = ci * kh * kw;
-        if oh * ow == 0 {
+        let Some(unfold) = Unfold::of_pool(&conv.pool_spec, [ci, h, w]) else {
             continue;
-        }
-        let strides = conv.pool_spec.strides();
-        let dil = conv.pool_spec.dilations();
-        let unfold = Unfold {
-            input: [ci, h, w],
-            kernel: [kh, kw],
-            strides: [strides[0], strides[1]],
-            dilations: [dil[0], dil[1]],
-            pad_before: [pads[0].pad_before, pads[1].pad_before],
-            output: [oh, ow],
         };
         let bias_plain = bias.try_as_plain_ram()?;
         let bias_all = bias_plain.as_slice::<f32>()?;
@@ -344,11 +352,8 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
             weights: Arc::new(weights),
             bias: Arc::new(bias_vals),
         };
-        let mut patch = TypedModelPatch::default();
-        let x = patch.tap_model(&model, node.inputs[0])?;
-        let y = patch.wire_node(format!("{name}.unfold_conv"), op, &[x])?[0];
-        patch.shunt_outside(&model, OutletId::new(id, 0), y)?;
-        patch.apply(&mut model)?;
+        let x = node.inputs[0];
+        replace_with_op(&mut model, &[x], id, format!("{name}.unfold_conv"), op)?;
         done += 1;
     }
     Ok((model, done))

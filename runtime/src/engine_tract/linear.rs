@@ -14,6 +14,7 @@ use tract_nnef::tract_core::ops::binary::TypedBinOp;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
 use super::gemm::{self, MR, PackedB};
+use super::rewrite::replace_with_op;
 
 /// Tokens (rows of the product) from which a linear layer runs natively.
 pub const MIN_ROWS: usize = 8;
@@ -143,10 +144,25 @@ struct Layer {
     n: usize,
 }
 
-/// The node `id` as a linear layer: an f32 [`EinSum`] of one activation whose last axis is
-/// summed against a constant rank-2 matrix, every other activation axis kept in place, the
-/// matrix's other axis last in the output.
-fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
+/// An f32 [`EinSum`] node of one activation (concrete shape) and one constant rank-2 matrix:
+/// what a linear layer ([`as_layer`]) and a 1x1 convolution ([`super::pointwise`]) are before
+/// their axes are read.
+pub(crate) struct ConstProduct<'a> {
+    /// The op.
+    pub es: &'a EinSum,
+    /// Which input is the activation (the other the matrix).
+    pub xi: usize,
+    /// The activation's shape.
+    pub input: TVec<usize>,
+    /// The matrix.
+    pub w: Arc<Tensor>,
+}
+
+/// The node `id` as a [`ConstProduct`], if it is one.
+pub(crate) fn const_product(
+    model: &TypedModel,
+    id: usize,
+) -> TractResult<Option<ConstProduct<'_>>> {
     let node = model.node(id);
     let Some(es) = node.op_as::<EinSum>() else {
         return Ok(None);
@@ -163,12 +179,67 @@ fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     let Some(input) = xf.shape.as_concrete().map(TVec::from) else {
         return Ok(None);
     };
+    let Some(w) = wf.konst.clone() else {
+        return Ok(None);
+    };
     if xf.konst.is_some()
         || xf.datum_type != f32::datum_type()
         || wf.datum_type != f32::datum_type()
     {
         return Ok(None);
     }
+    Ok(Some(ConstProduct { es, xi, input, w }))
+}
+
+/// The single `Add` of a constant after a node ([`const_add_after`]).
+pub(crate) struct ConstAdd {
+    /// The `Add` node.
+    pub add_id: usize,
+    /// The constant it adds.
+    pub value: Arc<Tensor>,
+    /// Its other input's fact (the node's output).
+    pub sum: TypedFact,
+    /// Its output's fact.
+    pub out: TypedFact,
+}
+
+/// The single `Add` after node `id` (not a model output), if it adds a constant.
+pub(crate) fn const_add_after(model: &TypedModel, id: usize) -> TractResult<Option<ConstAdd>> {
+    let outlet = &model.node(id).outputs[0];
+    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
+        return Ok(None);
+    }
+    let add_id = outlet.successors[0].node;
+    let add = model.node(add_id);
+    let is_add = add
+        .op_as::<TypedBinOp>()
+        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
+    if !is_add || add.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let other = if add.inputs[0].node == id { 1 } else { 0 };
+    let facts = model.node_input_facts(add_id)?;
+    let Some(value) = facts[other].konst.clone() else {
+        return Ok(None);
+    };
+    let sum = facts[1 - other].clone();
+    let out = model.outlet_fact(OutletId::new(add_id, 0))?.clone();
+    Ok(Some(ConstAdd {
+        add_id,
+        value,
+        sum,
+        out,
+    }))
+}
+
+/// The node `id` as a linear layer: an f32 [`EinSum`] of one activation whose last axis is
+/// summed against a constant rank-2 matrix, every other activation axis kept in place, the
+/// matrix's other axis last in the output.
+fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
+    let Some(ConstProduct { es, xi, input, w }) = const_product(model, id)? else {
+        return Ok(None);
+    };
+    let wi = 1 - xi;
     let xr = input.len();
     let (mut k_pos, mut n_pos) = (None, None);
     for axis in es.axes.iter_all_axes() {
@@ -186,17 +257,14 @@ fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     let (Some(k_pos), Some(_)) = (k_pos, n_pos) else {
         return Ok(None);
     };
-    let Some(konst) = wf.konst.as_ref() else {
-        return Ok(None);
-    };
     let w = if k_pos == 0 {
-        konst.clone().into_tensor()
+        w.into_tensor()
     } else {
-        konst.clone().into_tensor().permute_axes(&[1, 0])?
+        w.into_tensor().permute_axes(&[1, 0])?
     };
     let n = w.shape()[1];
     Ok(Some(Layer {
-        x: node.inputs[xi],
+        x: model.node(id).inputs[xi],
         input,
         w,
         n,
@@ -206,30 +274,22 @@ fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
 /// The constant bias `[n]` (any rank, ones before the last axis) that the single `Add`
 /// successor of `id` adds, with that node.
 fn bias_after(model: &TypedModel, id: usize, n: usize) -> TractResult<Option<(usize, Vec<f32>)>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
-        return Ok(None);
-    }
-    let add_id = outlet.successors[0].node;
-    let add = model.node(add_id);
-    let is_add = add
-        .op_as::<TypedBinOp>()
-        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
-    if !is_add || add.inputs.len() != 2 {
-        return Ok(None);
-    }
-    let other = if add.inputs[0].node == id { 1 } else { 0 };
-    let facts = model.node_input_facts(add_id)?;
-    let Some(b) = facts[other].konst.as_ref() else {
+    let Some(ConstAdd {
+        add_id,
+        value: b,
+        sum,
+        out,
+    }) = const_add_after(model, id)?
+    else {
         return Ok(None);
     };
-    let out_rank = facts[1 - other].rank();
+    let out_rank = sum.rank();
     let shape = b.shape();
     let bias_like = b.datum_type() == f32::datum_type()
         && shape.len() <= out_rank
         && shape.last() == Some(&n)
         && shape[..shape.len() - 1].iter().all(|&d| d == 1);
-    if !bias_like || model.outlet_fact(OutletId::new(add_id, 0))?.shape != facts[1 - other].shape {
+    if !bias_like || out.shape != sum.shape {
         return Ok(None);
     }
     let plain = b.try_as_plain_ram()?;
@@ -266,12 +326,8 @@ pub fn native_linears(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
             bias: bias.as_ref().map(|(_, b)| Arc::new(b.clone())),
         };
         let replaced = bias.map_or(id, |(add_id, _)| add_id);
-        let name = model.node(id).name.clone();
-        let mut patch = TypedModelPatch::default();
-        let x = patch.tap_model(&model, layer.x)?;
-        let y = patch.wire_node(format!("{name}.packed_linear"), op, &[x])?[0];
-        patch.shunt_outside(&model, OutletId::new(replaced, 0), y)?;
-        patch.apply(&mut model)?;
+        let name = format!("{}.packed_linear", model.node(id).name);
+        replace_with_op(&mut model, &[layer.x], replaced, name, op)?;
         done += 1;
     }
     Ok((model, done))

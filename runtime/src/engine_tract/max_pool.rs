@@ -21,23 +21,16 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::MaxPool;
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
+use super::conv_unfold::Unfold;
 use super::gemm;
+use super::rewrite::replace_with_op;
 
 /// A 2-D max pooling of `[1, C, H, W]` or `[C, H, W]` f32 (see the module doc).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct MaxPool2d {
-    /// Channels, rows, columns of the input.
-    pub input: [usize; 3],
-    /// Kernel rows, columns.
-    pub kernel: [usize; 2],
-    /// Strides (rows, columns).
-    pub strides: [usize; 2],
-    /// Dilations (rows, columns).
-    pub dilations: [usize; 2],
-    /// Padding before (rows, columns).
-    pub pad_before: [usize; 2],
-    /// Output rows, columns.
-    pub output: [usize; 2],
+    /// The windows: input channels and map, kernel, strides, dilations, padding before, output
+    /// map (the geometry a convolution's patches have).
+    pub window: Unfold,
     /// Whether input and output carry a batch axis of 1 (NCHW; CHW otherwise).
     pub batch_axis: bool,
 }
@@ -58,19 +51,19 @@ impl MaxPool2d {
 
     /// Input columns a kernel row's horizontal pass covers: `(OW - 1) * SW + 1`.
     fn span(&self) -> usize {
-        (self.output[1] - 1) * self.strides[1] + 1
+        (self.window.output[1] - 1) * self.window.strides[1] + 1
     }
 
     /// One channel: `plane` (`H x W`) into `out` (`OH x OW`), with `rows` (`H x OW`: each input
     /// row's maximum over the kernel columns at the output columns) and `full` ([`Self::span`]
     /// values) as scratch.
     fn pool_plane(&self, plane: &[f32], out: &mut [f32], rows: &mut [f32], full: &mut [f32]) {
-        let [_, h, w] = self.input;
-        let [kh, kw] = self.kernel;
-        let [sy, sx] = self.strides;
-        let [dy, dx] = self.dilations;
-        let [pt, pl] = self.pad_before;
-        let [oh, ow] = self.output;
+        let [_, h, w] = self.window.input;
+        let [kh, kw] = self.window.kernel;
+        let [sy, sx] = self.window.strides;
+        let [dy, dx] = self.window.dilations;
+        let [pt, pl] = self.window.pad_before;
+        let [oh, ow] = self.window.output;
         for (irow, row) in plane.chunks_exact(w).zip(rows.chunks_exact_mut(ow)).take(h) {
             full.fill(f32::MIN);
             for kx in 0..kw {
@@ -114,7 +107,7 @@ impl Op for MaxPool2d {
     fn info(&self) -> TractResult<Vec<String>> {
         Ok(vec![format!(
             "{:?} kernel {:?} strides {:?} -> {:?} [native]",
-            self.input, self.kernel, self.strides, self.output
+            self.window.input, self.window.kernel, self.window.strides, self.window.output
         )])
     }
     op_as_typed_op!();
@@ -125,9 +118,9 @@ impl EvalOp for MaxPool2d {
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         let x = args_1!(inputs);
-        let [c, h, w] = self.input;
-        let [oh, ow] = self.output;
-        let want = self.with_batch(self.input);
+        let [c, h, w] = self.window.input;
+        let [oh, ow] = self.window.output;
+        let want = self.with_batch(self.window.input);
         ensure!(
             x.shape() == &*want,
             "MaxPool2d input {:?}, expected {want:?}",
@@ -142,7 +135,7 @@ impl EvalOp for MaxPool2d {
             return Ok(tvec!(out.into_tvalue()));
         }
         // Channels a task: two tasks a thread when the pool is worth its dispatch.
-        let parallel = gemm::worth_threads(c * h * w * self.kernel[0]);
+        let parallel = gemm::worth_threads(c * h * w * self.window.kernel[0]);
         let per_task = c.div_ceil(8).max(1);
         let (span, plane_out) = (self.span(), oh * ow);
         let done = gemm::on_threads(parallel, ys, per_task * plane_out, |t, outs| {
@@ -163,8 +156,8 @@ impl EvalOp for MaxPool2d {
 impl TypedOp for MaxPool2d {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
         ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        let [c, _, _] = self.input;
-        let [oh, ow] = self.output;
+        let [c, _, _] = self.window.input;
+        let [oh, ow] = self.window.output;
         Ok(tvec!(f32::fact(&*self.with_batch([c, oh, ow]))))
     }
 
@@ -206,26 +199,12 @@ pub fn native_max_pools(mut model: TypedModel) -> TractResult<(TypedModel, usize
             [c, h, w] if !batch_axis => (c, h, w),
             _ => continue,
         };
-        let pads = spec.computed_padding(&[h, w]);
-        let (oh, ow) = (pads[0].convoluted, pads[1].convoluted);
-        if oh * ow == 0 || c == 0 {
+        let Some(window) = Unfold::of_pool(spec, [c, h, w]) else {
             continue;
-        }
-        let (strides, dil) = (spec.strides(), spec.dilations());
-        let op = MaxPool2d {
-            input: [c, h, w],
-            kernel: [spec.kernel_shape[0], spec.kernel_shape[1]],
-            strides: [strides[0], strides[1]],
-            dilations: [dil[0], dil[1]],
-            pad_before: [pads[0].pad_before, pads[1].pad_before],
-            output: [oh, ow],
-            batch_axis,
         };
-        let mut patch = TypedModelPatch::default();
-        let x = patch.tap_model(&model, node.inputs[0])?;
-        let y = patch.wire_node(format!("{name}.max_pool"), op, &[x])?[0];
-        patch.shunt_outside(&model, OutletId::new(id, 0), y)?;
-        patch.apply(&mut model)?;
+        let op = MaxPool2d { window, batch_axis };
+        let x = node.inputs[0];
+        replace_with_op(&mut model, &[x], id, format!("{name}.max_pool"), op)?;
         done += 1;
     }
     Ok((model, done))
@@ -238,7 +217,9 @@ mod tests {
     //! and every stage of the committed default bundle.
     use super::*;
     use crate::engine_tract::rewrite::Pass;
-    use crate::engine_tract::test_support::{assert_pass_keeps_stage_bits, bits, run_optimized};
+    use crate::engine_tract::test_support::{
+        assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized,
+    };
     use tract_nnef::tract_core::ops::cnn::{PaddingSpec, PoolSpec};
 
     /// `(channels, [h, w], kernel, stride, pad, dilation, batch axis)`.
@@ -312,28 +293,21 @@ mod tests {
         let (model, inputs) = pool_model((64, [96, 160], 3, 2, 1, 1, true));
         let want = run_optimized(model.clone(), &inputs);
         let native = native_max_pools(model).unwrap().0;
-        let pool = std::sync::Arc::new(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(2)
-                .build()
-                .unwrap(),
-        );
-        let got = tract_linalg::multithread::multithread_tract_scope(
-            tract_linalg::multithread::Executor::MultiThread(pool),
-            || run_optimized(native, &inputs),
-        );
+        let got = on_two_threads(|| run_optimized(native, &inputs));
         assert_eq!(bits(&got[0]), bits(&want[0]));
     }
 
     #[test]
     fn a_wrong_input_is_an_error_value() {
         let op = MaxPool2d {
-            input: [2, 4, 4],
-            kernel: [3, 3],
-            strides: [2, 2],
-            dilations: [1, 1],
-            pad_before: [1, 1],
-            output: [2, 2],
+            window: Unfold {
+                input: [2, 4, 4],
+                kernel: [3, 3],
+                strides: [2, 2],
+                dilations: [1, 1],
+                pad_before: [1, 1],
+                output: [2, 2],
+            },
             batch_axis: true,
         };
         let x = Tensor::zero::<f32>(&[1, 3, 4, 4]).unwrap();

@@ -1,7 +1,7 @@
 //! The 1x1 convolutions of channel-first maps as the native product.
 //!
 //! After decluttering, a 1x1 convolution of a `[1, C, H, W]` (or `[C, H, W]`) map is an
-//! [`EinSum`] of constant weights `[C_out, C]` and the map, contracting its channel axis,
+//! `EinSum` of constant weights `[C_out, C]` and the map, contracting its channel axis,
 //! usually followed by an `Add` of a constant bias `[C_out, 1, 1]`. [`super::linear`] takes
 //! products whose contracted axis is last (tokens x features); these contract the channel axis,
 //! so tract kept them: ResNet-50's bottleneck projections ran through tract's product at 28-60
@@ -18,11 +18,11 @@
 //! kernels sum in another order). On the AVX-512 tier only, as [`gemm`].
 
 use tract_nnef::internal::*;
-use tract_nnef::tract_core::ops::binary::TypedBinOp;
-use tract_nnef::tract_core::ops::einsum::EinSum;
 
 use super::conv_unfold::MIN_OUTPUT_CHANNELS;
 use super::gemm::{self, NR, PackedA};
+use super::linear::{ConstAdd, ConstProduct, const_add_after, const_product};
+use super::rewrite::replace_with_op;
 
 /// Pixels (columns of the product) from which a 1x1 convolution runs natively: one B panel.
 pub const MIN_PIXELS: usize = NR;
@@ -129,7 +129,7 @@ impl TypedOp for PointwiseConv {
     as_op!();
 }
 
-/// What an [`EinSum`] node is when it is a 1x1 convolution of a channel-first map.
+/// What an `EinSum` node is when it is a 1x1 convolution of a channel-first map.
 struct Pointwise {
     /// The map.
     x: OutletId,
@@ -143,34 +143,16 @@ struct Pointwise {
     w: Tensor,
 }
 
-/// The node `id` as a 1x1 convolution: an f32 [`EinSum`] of a map and a constant rank-2
+/// The node `id` as a 1x1 convolution: an f32 `EinSum` of a map and a constant rank-2
 /// matrix, contracting one map axis (the channels) against the matrix, the matrix's other axis
 /// the output's channels, the map's axes after its channels kept in order after the output's,
 /// every other axis of length 1 (tract's decluttered 1x1 convolutions add or drop the batch
 /// axis: `IHW,OI->NOHW`, `NIHW,OI->OHW`).
 fn as_pointwise(model: &TypedModel, id: usize) -> TractResult<Option<Pointwise>> {
-    let node = model.node(id);
-    let Some(es) = node.op_as::<EinSum>() else {
+    let Some(ConstProduct { es, xi, input, w }) = const_product(model, id)? else {
         return Ok(None);
     };
-    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
-        return Ok(None);
-    }
-    let facts = model.node_input_facts(id)?;
-    let Some(wi) = (0..2).find(|&i| facts[i].konst.is_some() && facts[i].rank() == 2) else {
-        return Ok(None);
-    };
-    let xi = 1 - wi;
-    let (xf, wf) = (facts[xi], facts[wi]);
-    let Some(input) = xf.shape.as_concrete().map(TVec::from) else {
-        return Ok(None);
-    };
-    if xf.konst.is_some()
-        || xf.datum_type != f32::datum_type()
-        || wf.datum_type != f32::datum_type()
-    {
-        return Ok(None);
-    }
+    let wi = 1 - xi;
     let Some(output) = model.outlet_fact(OutletId::new(id, 0))?.shape.as_concrete() else {
         return Ok(None);
     };
@@ -211,19 +193,16 @@ fn as_pointwise(model: &TypedModel, id: usize) -> TractResult<Option<Pointwise>>
     {
         return Ok(None);
     }
-    let Some(konst) = wf.konst.as_ref() else {
-        return Ok(None);
-    };
     let w = if m_w == 0 {
-        konst.clone().into_tensor()
+        w.into_tensor()
     } else {
-        konst.clone().into_tensor().permute_axes(&[1, 0])?
+        w.into_tensor().permute_axes(&[1, 0])?
     };
     if output[channel] != w.shape()[0] {
         return Ok(None);
     }
     Ok(Some(Pointwise {
-        x: node.inputs[xi],
+        x: model.node(id).inputs[xi],
         input,
         output,
         x_channel,
@@ -240,21 +219,13 @@ fn channel_bias_after(
     output: &[usize],
     channel: usize,
 ) -> TractResult<Option<(usize, Vec<f32>)>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
-        return Ok(None);
-    }
-    let add_id = outlet.successors[0].node;
-    let add = model.node(add_id);
-    let is_add = add
-        .op_as::<TypedBinOp>()
-        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
-    if !is_add || add.inputs.len() != 2 {
-        return Ok(None);
-    }
-    let other = if add.inputs[0].node == id { 1 } else { 0 };
-    let facts = model.node_input_facts(add_id)?;
-    let Some(b) = facts[other].konst.as_ref() else {
+    let Some(ConstAdd {
+        add_id,
+        value: b,
+        sum,
+        out,
+    }) = const_add_after(model, id)?
+    else {
         return Ok(None);
     };
     let shape = b.shape();
@@ -264,12 +235,8 @@ fn channel_bias_after(
             .iter()
             .enumerate()
             .all(|(i, &d)| d == if i == channel { output[channel] } else { 1 });
-    let same_shape = model
-        .outlet_fact(OutletId::new(add_id, 0))?
-        .shape
-        .as_concrete()
-        == Some(output)
-        && facts[1 - other].shape.as_concrete() == Some(output);
+    let same_shape =
+        out.shape.as_concrete() == Some(output) && sum.shape.as_concrete() == Some(output);
     if !bias_like || !same_shape {
         return Ok(None);
     }
@@ -304,12 +271,8 @@ pub fn native_pointwise_convs(mut model: TypedModel) -> TractResult<(TypedModel,
             bias: bias.as_ref().map(|(_, b)| Arc::new(b.clone())),
         };
         let replaced = bias.map_or(id, |(add_id, _)| add_id);
-        let name = model.node(id).name.clone();
-        let mut patch = TypedModelPatch::default();
-        let x = patch.tap_model(&model, pw.x)?;
-        let y = patch.wire_node(format!("{name}.pointwise_conv"), op, &[x])?[0];
-        patch.shunt_outside(&model, OutletId::new(replaced, 0), y)?;
-        patch.apply(&mut model)?;
+        let name = format!("{}.pointwise_conv", model.node(id).name);
+        replace_with_op(&mut model, &[pw.x], replaced, name, op)?;
         done += 1;
     }
     Ok((model, done))

@@ -62,6 +62,28 @@ pub struct Rewrites {
     pub broadcast_binaries: usize,
 }
 
+/// Wire `op` (named `name`) on `inputs` of `model` in place of outlet 0 of node `replaced`: the
+/// one patch every rewrite into a single native op applies.
+///
+/// # Errors
+/// tract refusing the patch (an inconsistent model).
+pub(crate) fn replace_with_op(
+    model: &mut TypedModel,
+    inputs: &[OutletId],
+    replaced: usize,
+    name: String,
+    op: impl Into<Box<dyn TypedOp>>,
+) -> TractResult<()> {
+    let mut patch = TypedModelPatch::default();
+    let taps: TVec<OutletId> = inputs
+        .iter()
+        .map(|&o| patch.tap_model(model, o))
+        .collect::<TractResult<_>>()?;
+    let y = patch.wire_node(name, op, &taps)?[0];
+    patch.shunt_outside(model, OutletId::new(replaced, 0), y)?;
+    patch.apply(model)
+}
+
 /// The rewrites in the order [`optimise`] runs them (tract's optimiser between `Im2colStems`
 /// and `Fold`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]

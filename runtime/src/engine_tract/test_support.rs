@@ -192,6 +192,20 @@ pub(crate) fn assert_same_bits(stage: Stage, a: &[TValue], b: &[TValue]) {
     }
 }
 
+/// `f` on a private pool of two threads, as the engine runs after `set_threads(2)`.
+pub(crate) fn on_two_threads<R>(f: impl FnOnce() -> R) -> R {
+    let pool = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("pool"),
+    );
+    tract_linalg::multithread::multithread_tract_scope(
+        tract_linalg::multithread::Executor::MultiThread(pool),
+        f,
+    )
+}
+
 /// `model` optimised and run once on `inputs`, as the engine plans it.
 pub(crate) fn run_optimized(model: TypedModel, inputs: &TVec<TValue>) -> TVec<TValue> {
     model
