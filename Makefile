@@ -88,7 +88,7 @@ test-paper: $(PAPER_BUNDLE)/manifest.sha256
 $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 	cd models && .venv/bin/python -m satmap_ref.export --config paper --out build/paper
 
-# Our runtime, onnxruntime and PyTorch eager side by side (never run in CI; ~25 min): every stage
+# Our runtime, onnxruntime and PyTorch eager side by side (never run in CI; ~10 min on 2026-12-05): every stage
 # of test, nano and paper on each bundle's recorded inputs at 1 and 2 threads, FLOPs, the
 # machine's matmul peak, max RSS per engine; writes docs/perf.md and docs/perf.json. See
 # models/src/satmap_ref/peers.py. PEERS_FLAGS=--rounds 1 for a quick look.

@@ -37,7 +37,7 @@ pub struct Rewrites {
     pub row_softmaxes: usize,
     /// Max poolings run as [`max_pool::MaxPool2d`] (the ResNet stems'; every tier).
     pub max_pools: usize,
-    /// Convolutions of 64 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
+    /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
     pub unfolded_convs: usize,
     /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on the
