@@ -8,10 +8,11 @@
 //! [`UnfoldConv`]: the weights packed once at load for [`gemm::product`], the patches
 //! ([`Unfold`]: one row per input channel and tap, a shifted copy of the input rows with zeros
 //! in the padding) gathered straight into the product's packed blocks as it goes (no `[k, n]`
-//! matrix is ever laid out: the scratch is one block of [`gemm::KC`] x 1,024 values), the bias
+//! matrix is ever laid out: the scratch is one block of [`gemm::KC`] x 1,024 values, or the
+//! whole B of a deep product of few columns, [`gemm::WHOLE_B_MAX`] values at most), the bias
 //! added to the finished sums. Narrower convolutions keep tract's plan (the product's 12-row
-//! tiles would be mostly empty); a 1x1 convolution is a matmul after decluttering
-//! ([`super::linear`]).
+//! tiles would be mostly empty); a 1x1 convolution is a product after decluttering
+//! ([`super::pointwise`] for channel-first maps).
 //!
 //! Bit for bit with tract's im2col: the product sums `k` in the order of tract's own im2col and
 //! of the OIHW weights (input channel, then kernel row, then kernel column) in one fused
@@ -202,20 +203,22 @@ impl UnfoldConv {
     /// `[1, C, H, W]` or `[C, H, W]`.
     fn input_shape(&self) -> TVec<usize> {
         let [c, h, w] = self.unfold.input;
-        self.with_batch([c, h, w])
+        with_batch(self.batch_axis, [c, h, w])
     }
 
     /// `[1, C_out, OH, OW]` or `[C_out, OH, OW]`.
     fn output_shape(&self) -> TVec<usize> {
         let [oh, ow] = self.unfold.output;
-        self.with_batch([self.out_channels, oh, ow])
+        with_batch(self.batch_axis, [self.out_channels, oh, ow])
     }
+}
 
-    fn with_batch(&self, chw: [usize; 3]) -> TVec<usize> {
-        let mut s: TVec<usize> = if self.batch_axis { tvec![1] } else { tvec![] };
-        s.extend(chw);
-        s
-    }
+/// `[1, C, H, W]` with a batch axis, `[C, H, W]` without: the shapes of the channel-first ops
+/// ([`UnfoldConv`], [`super::max_pool::MaxPool2d`]).
+pub(crate) fn with_batch(batch_axis: bool, chw: [usize; 3]) -> TVec<usize> {
+    let mut s: TVec<usize> = if batch_axis { tvec![1] } else { tvec![] };
+    s.extend(chw);
+    s
 }
 
 impl EvalOp for UnfoldConv {

@@ -191,47 +191,6 @@ pub(crate) fn const_product(
     Ok(Some(ConstProduct { es, xi, input, w }))
 }
 
-/// The single `Add` of a constant after a node ([`const_add_after`]).
-pub(crate) struct ConstAdd {
-    /// The `Add` node.
-    pub add_id: usize,
-    /// The constant it adds.
-    pub value: Arc<Tensor>,
-    /// Its other input's fact (the node's output).
-    pub sum: TypedFact,
-    /// Its output's fact.
-    pub out: TypedFact,
-}
-
-/// The single `Add` after node `id` (not a model output), if it adds a constant.
-pub(crate) fn const_add_after(model: &TypedModel, id: usize) -> TractResult<Option<ConstAdd>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
-        return Ok(None);
-    }
-    let add_id = outlet.successors[0].node;
-    let add = model.node(add_id);
-    let is_add = add
-        .op_as::<TypedBinOp>()
-        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
-    if !is_add || add.inputs.len() != 2 {
-        return Ok(None);
-    }
-    let other = if add.inputs[0].node == id { 1 } else { 0 };
-    let facts = model.node_input_facts(add_id)?;
-    let Some(value) = facts[other].konst.clone() else {
-        return Ok(None);
-    };
-    let sum = facts[1 - other].clone();
-    let out = model.outlet_fact(OutletId::new(add_id, 0))?.clone();
-    Ok(Some(ConstAdd {
-        add_id,
-        value,
-        sum,
-        out,
-    }))
-}
-
 /// The node `id` as a linear layer: an f32 [`EinSum`] of one activation whose last axis is
 /// summed against a constant rank-2 matrix, every other activation axis kept in place, the
 /// matrix's other axis last in the output.
@@ -271,25 +230,32 @@ fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     }))
 }
 
-/// The constant bias `[n]` (any rank, ones before the last axis) that the single `Add`
-/// successor of `id` adds, with that node.
-fn bias_after(model: &TypedModel, id: usize, n: usize) -> TractResult<Option<(usize, Vec<f32>)>> {
-    let Some(ConstAdd {
-        add_id,
-        value: b,
-        sum,
-        out,
-    }) = const_add_after(model, id)?
-    else {
+/// The constant bias that the single `Add` after node `id` (not a model output) adds, with
+/// that `Add` node: f32, of a shape `accepts` takes, the `Add` not broadcasting the sum.
+pub(crate) fn bias_after(
+    model: &TypedModel,
+    id: usize,
+    accepts: impl Fn(&[usize]) -> bool,
+) -> TractResult<Option<(usize, Vec<f32>)>> {
+    let outlet = &model.node(id).outputs[0];
+    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
+        return Ok(None);
+    }
+    let add_id = outlet.successors[0].node;
+    let add = model.node(add_id);
+    let is_add = add
+        .op_as::<TypedBinOp>()
+        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
+    if !is_add || add.inputs.len() != 2 {
+        return Ok(None);
+    }
+    let other = if add.inputs[0].node == id { 1 } else { 0 };
+    let facts = model.node_input_facts(add_id)?;
+    let Some(b) = facts[other].konst.as_ref() else {
         return Ok(None);
     };
-    let out_rank = sum.rank();
-    let shape = b.shape();
-    let bias_like = b.datum_type() == f32::datum_type()
-        && shape.len() <= out_rank
-        && shape.last() == Some(&n)
-        && shape[..shape.len() - 1].iter().all(|&d| d == 1);
-    if !bias_like || out.shape != sum.shape {
+    let bias_like = b.datum_type() == f32::datum_type() && accepts(b.shape());
+    if !bias_like || model.outlet_fact(OutletId::new(add_id, 0))?.shape != facts[1 - other].shape {
         return Ok(None);
     }
     let plain = b.try_as_plain_ram()?;
@@ -313,7 +279,13 @@ pub fn native_linears(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
         if rows < MIN_ROWS || layer.n < 2 || k == 0 {
             continue;
         }
-        let bias = bias_after(&model, id, layer.n)?;
+        // `[n]`, or any rank up to the output's with ones before `n`.
+        let (rank, n) = (layer.input.len(), layer.n);
+        let bias = bias_after(&model, id, |shape| {
+            shape.len() <= rank
+                && shape.last() == Some(&n)
+                && shape[..shape.len() - 1].iter().all(|&d| d == 1)
+        })?;
         let w_plain = layer.w.try_as_plain_ram()?;
         let op = PackedLinear {
             input: layer.input.clone(),

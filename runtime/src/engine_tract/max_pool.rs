@@ -21,7 +21,7 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::MaxPool;
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
-use super::conv_unfold::Unfold;
+use super::conv_unfold::{Unfold, with_batch};
 use super::gemm;
 use super::rewrite::replace_with_op;
 
@@ -43,12 +43,6 @@ fn fold(acc: f32, v: f32) -> f32 {
 }
 
 impl MaxPool2d {
-    fn with_batch(&self, chw: [usize; 3]) -> TVec<usize> {
-        let mut s: TVec<usize> = if self.batch_axis { tvec![1] } else { tvec![] };
-        s.extend(chw);
-        s
-    }
-
     /// Input columns a kernel row's horizontal pass covers: `(OW - 1) * SW + 1`.
     fn span(&self) -> usize {
         (self.window.output[1] - 1) * self.window.strides[1] + 1
@@ -120,7 +114,7 @@ impl EvalOp for MaxPool2d {
         let x = args_1!(inputs);
         let [c, h, w] = self.window.input;
         let [oh, ow] = self.window.output;
-        let want = self.with_batch(self.window.input);
+        let want = with_batch(self.batch_axis, self.window.input);
         ensure!(
             x.shape() == &*want,
             "MaxPool2d input {:?}, expected {want:?}",
@@ -128,13 +122,13 @@ impl EvalOp for MaxPool2d {
         );
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
-        let mut out = gemm::output_tensor(&self.with_batch([c, oh, ow]))?;
+        let mut out = gemm::output_tensor(&with_batch(self.batch_axis, [c, oh, ow]))?;
         let mut po = out.try_as_plain_ram_mut()?;
         let ys = po.as_slice_mut::<f32>()?;
         if ys.is_empty() {
             return Ok(tvec!(out.into_tvalue()));
         }
-        // Channels a task: two tasks a thread when the pool is worth its dispatch.
+        // Channels a task: eight tasks in all, split over the pool when worth its dispatch.
         let parallel = gemm::worth_threads(c * h * w * self.window.kernel[0]);
         let per_task = c.div_ceil(8).max(1);
         let (span, plane_out) = (self.span(), oh * ow);
@@ -158,7 +152,7 @@ impl TypedOp for MaxPool2d {
         ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
         let [c, _, _] = self.window.input;
         let [oh, ow] = self.window.output;
-        Ok(tvec!(f32::fact(&*self.with_batch([c, oh, ow]))))
+        Ok(tvec!(f32::fact(&*with_batch(self.batch_axis, [c, oh, ow]))))
     }
 
     as_op!();
@@ -181,7 +175,6 @@ pub fn native_max_pools(mut model: TypedModel) -> TractResult<(TypedModel, usize
         };
         let spec = &pool.pool_spec;
         if pool.with_index_outputs.is_some()
-            || spec.kernel_shape.len() != 2
             || !matches!(spec.data_format, DataFormat::NCHW | DataFormat::CHW)
         {
             continue;

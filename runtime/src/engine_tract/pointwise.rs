@@ -21,7 +21,7 @@ use tract_nnef::internal::*;
 
 use super::conv_unfold::MIN_OUTPUT_CHANNELS;
 use super::gemm::{self, NR, PackedA};
-use super::linear::{ConstAdd, ConstProduct, const_add_after, const_product};
+use super::linear::{ConstProduct, bias_after, const_product};
 use super::rewrite::replace_with_op;
 
 /// Pixels (columns of the product) from which a 1x1 convolution runs natively: one B panel.
@@ -211,39 +211,6 @@ fn as_pointwise(model: &TypedModel, id: usize) -> TractResult<Option<Pointwise>>
     }))
 }
 
-/// The constant bias `[m]` (laid along the channel axis, every other axis of length 1, the
-/// output's rank) that the single `Add` successor of `id` adds, with that node.
-fn channel_bias_after(
-    model: &TypedModel,
-    id: usize,
-    output: &[usize],
-    channel: usize,
-) -> TractResult<Option<(usize, Vec<f32>)>> {
-    let Some(ConstAdd {
-        add_id,
-        value: b,
-        sum,
-        out,
-    }) = const_add_after(model, id)?
-    else {
-        return Ok(None);
-    };
-    let shape = b.shape();
-    let bias_like = b.datum_type() == f32::datum_type()
-        && shape.len() == output.len()
-        && shape
-            .iter()
-            .enumerate()
-            .all(|(i, &d)| d == if i == channel { output[channel] } else { 1 });
-    let same_shape =
-        out.shape.as_concrete() == Some(output) && sum.shape.as_concrete() == Some(output);
-    if !bias_like || !same_shape {
-        return Ok(None);
-    }
-    let plain = b.try_as_plain_ram()?;
-    Ok(Some((add_id, plain.as_slice::<f32>()?.to_vec())))
-}
-
 /// Rewrite every 1x1 convolution of a decluttered `model` (see [`as_pointwise`]) with at least
 /// [`MIN_OUTPUT_CHANNELS`] outputs and [`MIN_PIXELS`] pixels into a [`PointwiseConv`], its bias
 /// `Add` taken in; returns the model and the number rewritten.
@@ -261,7 +228,15 @@ pub fn native_pointwise_convs(mut model: TypedModel) -> TractResult<(TypedModel,
         if m < MIN_OUTPUT_CHANNELS || n < MIN_PIXELS || k == 0 || pw.input[pw.x_channel] != k {
             continue;
         }
-        let bias = channel_bias_after(&model, id, &pw.output, pw.channel)?;
+        // `[m]` laid along the output's channel axis, every other axis of length 1.
+        let (output, channel) = (&pw.output, pw.channel);
+        let bias = bias_after(&model, id, |shape| {
+            shape.len() == output.len()
+                && shape
+                    .iter()
+                    .enumerate()
+                    .all(|(i, &d)| d == if i == channel { output[channel] } else { 1 })
+        })?;
         let w_plain = pw.w.try_as_plain_ram()?;
         let op = PointwiseConv {
             input: pw.input.clone(),

@@ -4,16 +4,17 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), on the AVX-512 kernel tier the convolutions of 64 channels or more
-//! ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of channel-first
-//! maps ([`pointwise`]) on the native product ([`gemm`]), and
+//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), on the AVX-512 kernel tier the
+//! convolutions of 8 channels or more ([`conv_unfold`]), the linear layers ([`linear`]) and the
+//! 1x1 convolutions of channel-first maps ([`pointwise`]) on the native product ([`gemm`]), and
 //! (on the other tiers) the wide image stems, planned with im2col where tract would run them
-//! direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the outlets that
-//! depend on the weights alone, computed once ([`fold`]), and the binary ops optimisation left on
-//! tract's generic path ([`broadcast`], after the fold so that no folded op is rewritten for
-//! nothing), and the constants re-laid with natural strides ([`natural_consts`]). Every rewrite but
-//! [`conv_direct`] computes its graph's values bit for bit (each module's tests); that one sums
-//! the same products in another order.
+//! direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
+//! outlets that depend on the weights alone, computed once ([`fold`]), and the binary ops
+//! optimisation left on tract's generic path ([`broadcast`], after the fold so that no folded op
+//! is rewritten for nothing), and the constants re-laid with natural strides
+//! ([`natural_consts`]). Every rewrite computes its graph's values bit for bit (each module's
+//! tests) but on the stems tract would run direct spatial: [`conv_direct`], and [`conv_unfold`]
+//! on the AVX-512 tier, sum the same products in tract's im2col order instead.
 
 use tract_nnef::prelude::*;
 
