@@ -143,7 +143,7 @@ fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
     // Inside a pool task already (an op's own split): the product stays on that thread.
-    let parallel = worth_threads(m * n * k) && rayon::current_thread_index().is_none();
+    let parallel = worth_threads(m * n * k) && !in_task();
     let tasks = 2 * threads();
     if k > KC && n_panels * k * NR <= WHOLE_B_MAX {
         return rows_outer(ops, c, bias, parallel, tasks);
@@ -299,12 +299,9 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, per_task: usi
 /// task returned it.
 pub fn on_pool(tasks: usize, task: impl Fn(usize) -> bool + Sync + Send) -> bool {
     match current_tract_executor() {
-        Executor::MultiThread(pool) => pool.install(|| {
-            (0..tasks).into_par_iter().all(|t| {
-                super::vector_state::clear_upper();
-                task(t)
-            })
-        }),
+        Executor::MultiThread(pool) => {
+            pool.install(|| (0..tasks).into_par_iter().all(|t| as_task(|| task(t))))
+        }
         // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
         _ => (0..tasks).all(task),
     }
@@ -387,6 +384,28 @@ pub fn output_tensor(
     unsafe { tract_nnef::prelude::Tensor::uninitialized::<f32>(shape) }
 }
 
+std::thread_local! {
+    /// Whether this thread is running one task of an op's split ([`as_task`]).
+    static IN_TASK: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Run one task of an op's split on a pool thread: the vector state cleared first (tract's
+/// kernels may have left it dirty on this worker, see `vector_state`), and marked, so that a
+/// product inside it stays on its thread ([`in_task`]). The plan itself runs on a worker of the
+/// same pool (`on_engine_threads`), so being on a worker does not tell a task from the plan.
+fn as_task<R>(task: impl FnOnce() -> R) -> R {
+    super::vector_state::clear_upper();
+    let outer = IN_TASK.replace(true);
+    let result = task();
+    IN_TASK.set(outer);
+    result
+}
+
+/// Whether this thread is inside a task of an op's split (then it does not split again).
+fn in_task() -> bool {
+    IN_TASK.get()
+}
+
 /// Threads of the engine's pool (1 outside one).
 fn threads() -> usize {
     match current_tract_executor() {
@@ -414,10 +433,9 @@ where
     let chunk = chunk.max(1);
     match current_tract_executor() {
         Executor::MultiThread(pool) if parallel => pool.install(|| {
-            data.par_chunks_mut(chunk).enumerate().all(|(i, c)| {
-                super::vector_state::clear_upper();
-                task(i, c)
-            })
+            data.par_chunks_mut(chunk)
+                .enumerate()
+                .all(|(i, c)| as_task(|| task(i, c)))
         }),
         // The engine never runs on rayon's global pool (see `TractEngine::set_threads`).
         _ => data.chunks_mut(chunk).enumerate().all(|(i, c)| task(i, c)),
@@ -554,7 +572,48 @@ mod tests {
                 || run(m, n, k, true).0,
             );
             assert_eq!(two, want, "{m} x {n} x {k}");
+            // As the engine runs a plan: on a worker of the pool itself.
+            let inside = pool.install(|| {
+                tract_linalg::multithread::multithread_tract_scope(
+                    Executor::MultiThread(pool.clone()),
+                    || run(m, n, k, true).0,
+                )
+            });
+            assert_eq!(inside, want, "{m} x {n} x {k} from a worker");
         }
+    }
+
+    #[test]
+    fn tasks_are_marked_and_the_plan_thread_is_not() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let pool = std::sync::Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap(),
+        );
+        let marked = AtomicUsize::new(0);
+        let plan_marked = pool.install(|| {
+            tract_linalg::multithread::multithread_tract_scope(
+                Executor::MultiThread(pool.clone()),
+                || {
+                    let before = in_task();
+                    assert!(on_pool(8, |_| {
+                        marked.fetch_add(usize::from(in_task()), Ordering::Relaxed);
+                        true
+                    }));
+                    let mut data = [0.0f32; 64];
+                    assert!(on_threads(true, &mut data, 8, |_, _| {
+                        marked.fetch_add(usize::from(in_task()), Ordering::Relaxed);
+                        true
+                    }));
+                    before || in_task()
+                },
+            )
+        });
+        // A product on the plan's thread may split; one inside a task stays on its thread.
+        assert!(!plan_marked);
+        assert_eq!(marked.load(Ordering::Relaxed), 16);
     }
 
     #[test]
