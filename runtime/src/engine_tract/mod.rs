@@ -28,6 +28,7 @@ pub mod broadcast;
 pub mod conv_direct;
 pub mod conv_unfold;
 pub mod fold;
+pub mod gelu;
 pub mod gemm;
 pub mod linear;
 pub mod max_pool;

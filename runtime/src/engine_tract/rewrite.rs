@@ -4,11 +4,11 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), on the AVX-512 kernel tier the
-//! convolutions of 8 channels or more ([`conv_unfold`]), the linear layers ([`linear`]) and the
-//! 1x1 convolutions of channel-first maps ([`pointwise`]) on the native product ([`gemm`]), and
-//! (on the other tiers) the wide image stems, planned with im2col where tract would run them
-//! direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
+//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), the tanh GELUs ([`gelu`]), on the
+//! AVX-512 kernel tier the convolutions of 8 channels or more ([`conv_unfold`]), the linear
+//! layers ([`linear`]) and the 1x1 convolutions of channel-first maps ([`pointwise`]) on the
+//! native product ([`gemm`]), and (on the other tiers) the wide image stems, planned with im2col
+//! where tract would run them direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
 //! outlets that depend on the weights alone, computed once ([`fold`]), and the binary ops
 //! optimisation left on tract's generic path ([`broadcast`], after the fold so that no folded op
 //! is rewritten for nothing), and the constants re-laid with natural strides
@@ -19,7 +19,7 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gemm, linear,
+    attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gelu, gemm, linear,
     max_pool, natural_consts, pointwise, softmax, weighted_sum,
 };
 
@@ -38,6 +38,8 @@ pub struct Rewrites {
     pub row_softmaxes: usize,
     /// Max poolings run as [`max_pool::MaxPool2d`] (the ResNet stems'; every tier).
     pub max_pools: usize,
+    /// Tanh GELU chains run as [`gelu::TanhGelu`] (the Swin MLPs'; every tier).
+    pub tanh_gelus: usize,
     /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
     pub unfolded_convs: usize,
@@ -93,6 +95,7 @@ pub(crate) enum Pass {
     BilinearSamplers,
     RowSoftmaxes,
     MaxPools,
+    TanhGelus,
     UnfoldConvs,
     NativeLinears,
     PointwiseConvs,
@@ -129,6 +132,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::MaxPools) {
         (model, done.max_pools) = max_pool::native_max_pools(model)?;
+    }
+    if runs(Pass::TanhGelus) {
+        (model, done.tanh_gelus) = gelu::fuse_tanh_gelus(model)?;
     }
     // The native product has an AVX-512 kernel only; elsewhere tract's products stay.
     let native = gemm::available();

@@ -113,9 +113,11 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
             row_softmaxes: 2,
             ..none
         },
-        // One window attention per Swin block (`test`'s depths are 1, 2, 1, 1).
+        // One window attention and one tanh GELU per Swin block (`test`'s depths are 1, 2, 1,
+        // 1), on every tier.
         Stage::SatelliteEncoder => Rewrites {
             row_softmaxes: 5,
+            tanh_gelus: 5,
             ..none
         },
         // Per decoder layer (`test` has 2) one cross-attention sampler and two softmaxes; the
