@@ -30,6 +30,7 @@ pub mod conv_unfold;
 pub mod fold;
 pub mod gelu;
 pub mod gemm;
+pub mod layer_norm;
 pub mod linear;
 pub mod max_pool;
 pub mod natural_consts;

@@ -79,7 +79,7 @@ mod tests {
 
     use super::*;
     use crate::engine::Stage;
-    use crate::engine_tract::rewrite::{Pass, optimise_before};
+    use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
         assert_same_bits, bits, committed_stage_before, inputs_of, run_plain,
     };
@@ -116,7 +116,10 @@ mod tests {
     }
 
     /// The exported ONNX stages: tract's ONNX LayerNorm import is where the `[1, C]` scales
-    /// and shifts with unnatural strides come from (the compiled NNEF stages hold few).
+    /// and shifts with unnatural strides come from (the compiled NNEF stages hold few). Through
+    /// tract's optimiser alone: the engine's `layer_norm` pass takes those LayerNorms whole (so
+    /// on our own graphs this pass now finds nothing), and this pass stays for the ones it
+    /// does not match.
     #[cfg(feature = "onnx")]
     #[test]
     fn exported_stages_compute_what_they_computed_bit_for_bit() {
@@ -130,7 +133,7 @@ mod tests {
                 .expect("model")
                 .into_decluttered()
                 .expect("declutter");
-            let (plain, _) = optimise_before(model, Some(Pass::NaturalConsts)).expect("rewrites");
+            let plain = model.into_optimized().expect("optimise");
             let n = relaid_bit_for_bit(stage, plain);
             // `bev_encoder`'s two LayerNorms: a scale and a shift each, at least.
             if stage == Stage::BevEncoder {

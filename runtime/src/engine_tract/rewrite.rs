@@ -4,11 +4,12 @@
 //! On the decluttered graph first (their patterns are tract's decluttered ops): the deformable
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
-//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), the tanh GELUs ([`gelu`]), on the
-//! AVX-512 kernel tier the convolutions of 8 channels or more ([`conv_unfold`]), the linear
-//! layers ([`linear`]) and the 1x1 convolutions of channel-first maps ([`pointwise`]) on the
-//! native product ([`gemm`]), and (on the other tiers) the wide image stems, planned with im2col
-//! where tract would run them direct spatial ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
+//! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), the tanh GELUs ([`gelu`]), the
+//! LayerNorms ([`layer_norm`]), on the AVX-512 kernel tier the convolutions of 8 channels or
+//! more ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of
+//! channel-first maps ([`pointwise`]) on the native product ([`gemm`]), and (on the other
+//! tiers) the wide image stems, planned with im2col where tract would run them direct spatial
+//! ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
 //! outlets that depend on the weights alone, computed once ([`fold`]), and the binary ops
 //! optimisation left on tract's generic path ([`broadcast`], after the fold so that no folded op
 //! is rewritten for nothing), and the constants re-laid with natural strides
@@ -19,8 +20,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gelu, gemm, linear,
-    max_pool, natural_consts, pointwise, softmax, weighted_sum,
+    attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gelu, gemm,
+    layer_norm, linear, max_pool, natural_consts, pointwise, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -40,6 +41,8 @@ pub struct Rewrites {
     pub max_pools: usize,
     /// Tanh GELU chains run as [`gelu::TanhGelu`] (the Swin MLPs'; every tier).
     pub tanh_gelus: usize,
+    /// LayerNorm chains run as [`layer_norm::LayerNorm`] (every tier).
+    pub layer_norms: usize,
     /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
     pub unfolded_convs: usize,
@@ -96,6 +99,7 @@ pub(crate) enum Pass {
     RowSoftmaxes,
     MaxPools,
     TanhGelus,
+    LayerNorms,
     UnfoldConvs,
     NativeLinears,
     PointwiseConvs,
@@ -135,6 +139,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::TanhGelus) {
         (model, done.tanh_gelus) = gelu::fuse_tanh_gelus(model)?;
+    }
+    if runs(Pass::LayerNorms) {
+        (model, done.layer_norms) = layer_norm::fuse_layer_norms(model)?;
     }
     // The native product has an AVX-512 kernel only; elsewhere tract's products stay.
     let native = gemm::available();
