@@ -25,6 +25,7 @@ pub mod attention;
 pub mod batched;
 pub mod bilinear;
 pub mod broadcast;
+pub mod contraction;
 pub mod conv_direct;
 pub mod conv_unfold;
 pub mod fold;

@@ -20,8 +20,8 @@
 use tract_nnef::prelude::*;
 
 use crate::engine_tract::{
-    attention, batched, bilinear, broadcast, conv_direct, conv_unfold, fold, gelu, gemm,
-    layer_norm, linear, max_pool, natural_consts, pointwise, softmax, weighted_sum,
+    attention, batched, bilinear, broadcast, contraction, conv_direct, conv_unfold, fold, gelu,
+    gemm, layer_norm, linear, max_pool, natural_consts, pointwise, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -149,6 +149,9 @@ pub(crate) fn optimise_before(
         (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
     }
     if runs(Pass::NativeLinears) && native {
+        // Products over several axes at once reshaped into linear layers first (a layout
+        // change, not counted).
+        (model, _) = contraction::merge_contracted_axes(model)?;
         (model, done.native_linears) = linear::native_linears(model)?;
     }
     if runs(Pass::PointwiseConvs) && native {

@@ -82,7 +82,9 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // Linear layers run natively on the AVX-512 tier: the image encoder's 1x1 projection,
     // bev_query's value/offset/weight/output projections, bev_encoder's, the Swin blocks' and
     // the decoder's (per stage, `Stage::ALL` order).
-    let linears = if avx512 { [1, 6, 3, 18, 19] } else { [0; 5] };
+    // The attention output projections over heads and head width too, once `contraction` has
+    // merged those two axes (bev_query's one, the Swin's multi-head blocks', the decoder's).
+    let linears = if avx512 { [1, 7, 3, 21, 24] } else { [0; 5] };
     // 1x1 convolutions of channel-first maps: the tiny ResNet's downsampling projections and
     // the image neck's lateral; six in the satellite encoder (its FPN's channel-first maps).
     let pointwise = if avx512 { [4, 0, 0, 6, 0] } else { [0; 5] };
