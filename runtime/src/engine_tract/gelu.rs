@@ -14,11 +14,10 @@
 
 use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
-use tract_nnef::tract_core::ops::binary::TypedBinOp;
 use tract_nnef::tract_core::ops::element_wise::ElementWiseOp;
 
 use super::gemm;
-use super::rewrite::replace_with_op;
+use super::rewrite::{bin_inputs, only_successor, replace_with_op};
 
 /// Values a task computes at once: its tanh inputs stay in L1 between the three steps.
 const BLOCK_VALUES: usize = 1024;
@@ -127,22 +126,9 @@ impl TypedOp for TanhGelu {
     as_op!();
 }
 
-/// The one consumer of outlet 0 of node `id`, if it has exactly one and is not a model output.
-fn only_successor(model: &TypedModel, id: usize) -> TractResult<Option<usize>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
-        return Ok(None);
-    }
-    Ok(Some(outlet.successors[0].node))
-}
-
-/// Whether node `id` is the binary op `name` (`Add`, `Mul`) without quantised output.
+/// Whether node `id` is the binary op `name` without quantised output.
 fn is_bin(model: &TypedModel, id: usize, name: &str) -> bool {
-    let node = model.node(id);
-    node.inputs.len() == 2
-        && node
-            .op_as::<TypedBinOp>()
-            .is_some_and(|b| b.0.name() == name && b.1.is_none())
+    bin_inputs(model, id, name).is_some()
 }
 
 /// Whether node `id` is the elementwise op `name` (`Square`, `Tanh`).

@@ -15,11 +15,10 @@
 
 use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
-use tract_nnef::tract_core::ops::binary::TypedBinOp;
 use tract_nnef::tract_core::ops::nn::{Reduce, Reducer, RmsNorm};
 
 use super::gemm;
-use super::rewrite::replace_with_op;
+use super::rewrite::{bin_inputs as bin, only_successor, replace_with_op};
 
 /// Rows a task normalises at least (the pool's dispatch against a row of a few dozen values).
 const ROWS_PER_TASK: usize = 64;
@@ -134,24 +133,6 @@ impl TypedOp for LayerNorm {
     }
 
     as_op!();
-}
-
-/// The one consumer of outlet 0 of node `id`, if it has exactly one and is not a model output.
-fn only_successor(model: &TypedModel, id: usize) -> TractResult<Option<usize>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
-        return Ok(None);
-    }
-    Ok(Some(outlet.successors[0].node))
-}
-
-/// Node `id` as the binary op `name` without quantised output: its two inputs.
-fn bin(model: &TypedModel, id: usize, name: &str) -> Option<[OutletId; 2]> {
-    let node = model.node(id);
-    let is = node
-        .op_as::<TypedBinOp>()
-        .is_some_and(|b| b.0.name() == name && b.1.is_none());
-    (is && node.inputs.len() == 2).then(|| [node.inputs[0], node.inputs[1]])
 }
 
 /// The f32 values of a constant outlet whose dims are all 1 but the last, of `len` values.

@@ -18,6 +18,7 @@
 //! on the AVX-512 tier, sum the same products in tract's im2col order instead.
 
 use tract_nnef::prelude::*;
+use tract_nnef::tract_core::ops::binary::TypedBinOp;
 
 use crate::engine_tract::{
     attention, batched, bilinear, broadcast, contraction, conv_direct, conv_unfold, fold, gelu,
@@ -88,6 +89,29 @@ pub(crate) fn replace_with_op(
     let y = patch.wire_node(name, op, &taps)?[0];
     patch.shunt_outside(model, OutletId::new(replaced, 0), y)?;
     patch.apply(model)
+}
+
+/// The one consumer of outlet 0 of node `id`, if it has exactly one and is not a model output:
+/// the test every fused chain makes of its inner nodes.
+///
+/// # Errors
+/// tract failing to list the model's outputs.
+pub(crate) fn only_successor(model: &TypedModel, id: usize) -> TractResult<Option<usize>> {
+    let outlet = &model.node(id).outputs[0];
+    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
+        return Ok(None);
+    }
+    Ok(Some(outlet.successors[0].node))
+}
+
+/// Node `id`'s two inputs if it is the binary op `name` (`Add`, `Mul`, `Sub`) without a
+/// quantised output.
+pub(crate) fn bin_inputs(model: &TypedModel, id: usize, name: &str) -> Option<[OutletId; 2]> {
+    let node = model.node(id);
+    let is = node
+        .op_as::<TypedBinOp>()
+        .is_some_and(|b| b.0.name() == name && b.1.is_none());
+    (is && node.inputs.len() == 2).then(|| [node.inputs[0], node.inputs[1]])
 }
 
 /// The rewrites in the order [`optimise`] runs them (tract's optimiser between `Im2colStems`
