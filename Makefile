@@ -11,7 +11,8 @@ CARGO ?= cargo
 .PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers
 
 # The demo runs the binary `make test` builds (the same cargo command, so the dependency tree is
-# compiled once for both): the test profile, opt-level 3 for ours and tract's engine (Cargo.toml).
+# compiled once for both): the test profile, opt-level 3 for ours and tract's engine, the
+# dependencies without debug assertions (Cargo.toml).
 # `cargo run -p satmap-sim` would resolve features for that one package and compile tract again.
 demo:
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
@@ -88,7 +89,7 @@ test-paper: $(PAPER_BUNDLE)/manifest.sha256
 $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 	cd models && .venv/bin/python -m satmap_ref.export --config paper --out build/paper
 
-# Our runtime, onnxruntime and PyTorch eager side by side (never run in CI; ~10 min on 2026-12-05): every stage
+# Our runtime, onnxruntime and PyTorch eager side by side (never run in CI; 8-10 min on 2026-12-05): every stage
 # of test, nano and paper on each bundle's recorded inputs at 1 and 2 threads, FLOPs, the
 # machine's matmul peak, max RSS per engine; writes docs/perf.md and docs/perf.json. See
 # models/src/satmap_ref/peers.py. PEERS_FLAGS=--rounds 1 for a quick look.
