@@ -1,7 +1,7 @@
 //! Products of two activations (attention's scores `Q K^T` and weighted values `P V`, per head
 //! and window) as the native product.
 //!
-//! After decluttering they are [`EinSum`]s of two non-constant f32 operands with one summed
+//! After decluttering they are `EinSum`s of two non-constant f32 operands with one summed
 //! axis, one axis of each operand kept in the output and any number of batch axes (heads,
 //! windows). [`native_batched`] rewrites each into a [`BatchedProduct`]: per batch, both
 //! operands packed from their strided layout and [`gemm::product`] writing straight into the
@@ -12,9 +12,9 @@
 //! the committed default bundle). On the AVX-512 tier only, as [`gemm`].
 
 use tract_nnef::internal::*;
-use tract_nnef::tract_core::ops::einsum::EinSum;
 
 use super::gemm::{self, MR, NR, pack};
+use super::linear::f32_einsum;
 
 /// Rows from which a product runs natively (fewer: tract's matrix-vector kernels, another sum
 /// order).
@@ -224,18 +224,15 @@ fn strides(shape: &[usize]) -> TVec<usize> {
     s
 }
 
-/// The node `id` as a [`BatchedProduct`]: an f32 [`EinSum`] of two non-constant operands of
+/// The node `id` as a [`BatchedProduct`]: an f32 `EinSum` of two non-constant operands of
 /// concrete shapes, every axis a batch axis (in both operands and the output), a kept axis of
 /// one operand, or the one summed axis (in both operands only), with one kept axis each and
 /// the output's last axis one of them.
 pub(crate) fn as_batched(model: &TypedModel, id: usize) -> TractResult<Option<BatchedProduct>> {
     let node = model.node(id);
-    let Some(es) = node.op_as::<EinSum>() else {
+    let Some(es) = f32_einsum(node) else {
         return Ok(None);
     };
-    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
-        return Ok(None);
-    }
     let facts = model.node_input_facts(id)?;
     let out_fact = model.outlet_fact(OutletId::new(id, 0))?;
     let plain = |f: &TypedFact| f.datum_type == f32::datum_type() && f.konst.is_none();
@@ -345,6 +342,7 @@ mod tests {
     use crate::engine_tract::test_support::{
         assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized,
     };
+    use tract_nnef::tract_core::ops::einsum::EinSum;
 
     fn values(len: usize, seed: usize) -> Vec<f32> {
         (0..len)

@@ -18,6 +18,8 @@ use tract_nnef::tract_core::axes::AxesMapping;
 use tract_nnef::tract_core::ops::change_axes::AxisOp;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
+use super::linear::f32_einsum;
+
 /// What one einsum becomes: the activation's input, its reshapes, the constant, the product.
 struct Plan {
     /// The constant's input slot.
@@ -37,12 +39,9 @@ struct Plan {
 /// The node `id` as such a product, if it is one (module doc) and not already one-axis.
 fn plan(model: &TypedModel, id: usize) -> TractResult<Option<Plan>> {
     let node = model.node(id);
-    let Some(es) = node.op_as::<EinSum>() else {
+    let Some(es) = f32_einsum(node) else {
         return Ok(None);
     };
-    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
-        return Ok(None);
-    }
     let facts = model.node_input_facts(id)?;
     let Some(wi) = (0..2).find(|&i| facts[i].konst.is_some()) else {
         return Ok(None);

@@ -158,18 +158,23 @@ pub(crate) struct ConstProduct<'a> {
     pub w: Arc<Tensor>,
 }
 
+/// The node's op as a plain f32 [`EinSum`] of two inputs (no quantisation), the form every
+/// native product rewrite starts from.
+pub(crate) fn f32_einsum(node: &TypedNode) -> Option<&EinSum> {
+    let es = node.op_as::<EinSum>()?;
+    let plain = es.q_params.is_none() && es.operating_dt == f32::datum_type();
+    (plain && node.inputs.len() == 2).then_some(es)
+}
+
 /// The node `id` as a [`ConstProduct`], if it is one.
 pub(crate) fn const_product(
     model: &TypedModel,
     id: usize,
 ) -> TractResult<Option<ConstProduct<'_>>> {
     let node = model.node(id);
-    let Some(es) = node.op_as::<EinSum>() else {
+    let Some(es) = f32_einsum(node) else {
         return Ok(None);
     };
-    if es.q_params.is_some() || es.operating_dt != f32::datum_type() || node.inputs.len() != 2 {
-        return Ok(None);
-    }
     let facts = model.node_input_facts(id)?;
     let Some(wi) = (0..2).find(|&i| facts[i].konst.is_some() && facts[i].rank() == 2) else {
         return Ok(None);
