@@ -47,6 +47,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    satmap_sim::arena::system_malloc::share_one_arena();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::BuildPack(args) => satmap_sim::cli::build_pack::run(&args),

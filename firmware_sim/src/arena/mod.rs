@@ -14,6 +14,8 @@
 //! [`ArenaAllocator::host_side`], which serves from the system allocator: the arena then holds
 //! exactly what the ECU would hold. The replay is single-threaded, so one global flag suffices.
 
+pub mod system_malloc;
+
 use core::alloc::{GlobalAlloc, Layout};
 use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
