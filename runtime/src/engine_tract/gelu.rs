@@ -18,7 +18,7 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::element_wise::ElementWiseOp;
 
 use super::gemm;
-use super::rewrite::{bin_inputs, only_successor, replace_with_op};
+use super::rewrite::{bin_inputs, const_operand, only_successor, replace_with_op};
 
 /// Values a task computes at once: its tanh inputs stay in L1 between the three steps.
 const BLOCK_VALUES: usize = 1024;
@@ -127,11 +127,6 @@ impl TypedOp for TanhGelu {
     as_op!();
 }
 
-/// Whether node `id` is the binary op `name` without quantised output.
-fn is_bin(model: &TypedModel, id: usize, name: &str) -> bool {
-    bin_inputs(model, id, name).is_some()
-}
-
 /// Whether node `id` is the elementwise op `name` (`Square`, `Tanh`).
 fn is_unary(model: &TypedModel, id: usize, name: &str) -> bool {
     model
@@ -150,16 +145,20 @@ fn operands(model: &TypedModel, id: usize, from: usize) -> Option<(OutletId, Out
     }
 }
 
-/// The f32 value of a one-element constant outlet.
-fn scalar(model: &TypedModel, outlet: OutletId) -> TractResult<Option<f32>> {
-    let fact = model.outlet_fact(outlet)?;
-    let Some(k) = fact.konst.as_ref() else {
+/// If node `id` is the binary op `name` of one activation and a one-value f32 constant: the
+/// activation and the value.
+fn scalar_operand(
+    model: &TypedModel,
+    id: usize,
+    name: &str,
+) -> TractResult<Option<(OutletId, f32)>> {
+    let Some((other, k)) = const_operand(model, id, name)? else {
         return Ok(None);
     };
     if k.datum_type() != f32::datum_type() || k.len() != 1 {
         return Ok(None);
     }
-    Ok(Some(k.try_as_plain_ram()?.as_slice::<f32>()?[0]))
+    Ok(Some((other, k.try_as_plain_ram()?.as_slice::<f32>()?[0])))
 }
 
 /// The chain ending in `Tanh` node `tanh`, if it is a tanh GELU of one input wholly inside it:
@@ -167,22 +166,14 @@ fn scalar(model: &TypedModel, outlet: OutletId) -> TractResult<Option<f32>> {
 fn gelu_at(model: &TypedModel, tanh: usize) -> TractResult<Option<(OutletId, usize, GeluConsts)>> {
     // Backwards: tanh <- Mul(arg, beta) <- Add(x, k) <- Mul(cube, kappa) <- Mul(x, Square(x)).
     let arg = model.node(tanh).inputs[0].node;
-    if !is_bin(model, arg, "Mul") {
-        return Ok(None);
-    }
-    let [i0, i1] = [model.node(arg).inputs[0], model.node(arg).inputs[1]];
-    let Some((sum, beta)) = (match (scalar(model, i0)?, scalar(model, i1)?) {
-        (None, Some(b)) => Some((i0.node, b)),
-        (Some(b), None) => Some((i1.node, b)),
-        _ => None,
-    }) else {
+    let Some((sum, beta)) = scalar_operand(model, arg, "Mul")? else {
         return Ok(None);
     };
-    if !is_bin(model, sum, "Add") {
+    let sum = sum.node;
+    let Some(ins) = bin_inputs(model, sum, "Add") else {
         return Ok(None);
-    }
+    };
     // The sum's two operands: x itself and `kappa * cube`; try both ways round.
-    let ins = model.node(sum).inputs.clone();
     for (x, k) in [(ins[0], ins[1]), (ins[1], ins[0])] {
         if let Some(found) = gelu_from(model, tanh, [arg, sum], x, k.node, beta)? {
             return Ok(Some(found));
@@ -200,16 +191,14 @@ fn gelu_from(
     k: usize,
     beta: f32,
 ) -> TractResult<Option<(OutletId, usize, GeluConsts)>> {
-    if x.slot != 0 || !is_bin(model, k, "Mul") {
+    if x.slot != 0 {
         return Ok(None);
     }
-    let ki = &model.node(k).inputs;
-    let (cube, kappa) = match (scalar(model, ki[0])?, scalar(model, ki[1])?) {
-        (None, Some(c)) => (ki[0].node, c),
-        (Some(c), None) => (ki[1].node, c),
-        _ => return Ok(None),
+    let Some((cube, kappa)) = scalar_operand(model, k, "Mul")? else {
+        return Ok(None);
     };
-    if !is_bin(model, cube, "Mul") {
+    let cube = cube.node;
+    if bin_inputs(model, cube, "Mul").is_none() {
         return Ok(None);
     }
     let Some((square, _)) = operands(model, cube, x.node)
@@ -222,33 +211,23 @@ fn gelu_from(
     let Some(plus) = only_successor(model, tanh)? else {
         return Ok(None);
     };
-    if !is_bin(model, plus, "Add") {
-        return Ok(None);
-    }
-    let Some((_, one)) = operands(model, plus, tanh) else {
-        return Ok(None);
-    };
-    let Some(one) = scalar(model, one)? else {
+    let Some((t, one)) = scalar_operand(model, plus, "Add")? else {
         return Ok(None);
     };
     let Some(times_x) = only_successor(model, plus)? else {
         return Ok(None);
     };
-    if !is_bin(model, times_x, "Mul") || operands(model, times_x, plus).map(|o| o.1) != Some(x) {
-        return Ok(None);
-    }
+    let x_times = bin_inputs(model, times_x, "Mul").is_some()
+        && operands(model, times_x, plus).map(|o| o.1) == Some(x);
     let Some(last) = only_successor(model, times_x)? else {
         return Ok(None);
     };
-    if !is_bin(model, last, "Mul") {
+    let Some((q, half)) = scalar_operand(model, last, "Mul")? else {
+        return Ok(None);
+    };
+    if t.node != tanh || !x_times || q.node != times_x {
         return Ok(None);
     }
-    let Some((_, half)) = operands(model, last, times_x) else {
-        return Ok(None);
-    };
-    let Some(half) = scalar(model, half)? else {
-        return Ok(None);
-    };
     // Every inner value feeds the chain alone, and no node broadcasts x to another shape.
     for id in [square, cube, k, sum, arg] {
         if only_successor(model, id)?.is_none() {

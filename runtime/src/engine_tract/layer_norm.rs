@@ -18,7 +18,7 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::nn::{Reduce, Reducer, RmsNorm};
 
 use super::gemm;
-use super::rewrite::{bin_inputs as bin, only_successor, replace_with_op};
+use super::rewrite::{bin_inputs as bin, const_operand, only_successor, replace_with_op};
 
 /// Rows a task normalises at least (the pool's dispatch against a row of a few dozen values).
 const ROWS_PER_TASK: usize = 64;
@@ -135,37 +135,23 @@ impl TypedOp for LayerNorm {
     as_op!();
 }
 
-/// The f32 values of a constant outlet whose dims are all 1 but the last, of `len` values.
-fn channel_const(
+/// If node `id` is the binary op `name` of node `from`'s output and an f32 constant of `len`
+/// values whose dims are all 1 but the last: that constant's values.
+fn channel_operand(
     model: &TypedModel,
-    outlet: OutletId,
-    len: usize,
+    id: usize,
+    name: &str,
+    (from, len): (usize, usize),
 ) -> TractResult<Option<Vec<f32>>> {
-    let fact = model.outlet_fact(outlet)?;
-    let Some(k) = fact.konst.as_ref() else {
+    let Some((other, k)) = const_operand(model, id, name)? else {
         return Ok(None);
     };
     let shape = k.shape();
     let ones = !shape.is_empty() && shape[..shape.len() - 1].iter().all(|&d| d == 1);
-    if k.datum_type() != f32::datum_type() || k.len() != len || !ones {
+    if other.node != from || k.datum_type() != f32::datum_type() || k.len() != len || !ones {
         return Ok(None);
     }
     Ok(Some(k.try_as_plain_ram()?.as_slice::<f32>()?.to_vec()))
-}
-
-/// Of binary node `id`'s inputs, the one from node `from` and a constant of `len` channels.
-fn with_const(
-    model: &TypedModel,
-    [i0, i1]: [OutletId; 2],
-    from: usize,
-    len: usize,
-) -> TractResult<Option<Vec<f32>>> {
-    let other = match (i0.node == from, i1.node == from) {
-        (true, false) => i1,
-        (false, true) => i0,
-        _ => return Ok(None),
-    };
-    channel_const(model, other, len)
 }
 
 /// The LayerNorm chain that starts with `Reduce<Sum>` node `reduce`, if it is one (module
@@ -191,10 +177,7 @@ fn layer_norm_at(
     let Some(mean) = only_successor(model, reduce)? else {
         return Ok(None);
     };
-    let Some(ins) = bin(model, mean, "Mul") else {
-        return Ok(None);
-    };
-    let Some(recip) = with_const(model, ins, reduce, 1)? else {
+    let Some(recip) = channel_operand(model, mean, "Mul", (reduce, 1))? else {
         return Ok(None);
     };
     let Some(diff) = only_successor(model, mean)? else {
@@ -220,19 +203,13 @@ fn layer_norm_at(
     let Some(scale) = only_successor(model, norm)? else {
         return Ok(None);
     };
-    let Some(ins) = bin(model, scale, "Mul") else {
-        return Ok(None);
-    };
-    let Some(gamma) = with_const(model, ins, norm, c)? else {
+    let Some(gamma) = channel_operand(model, scale, "Mul", (norm, c))? else {
         return Ok(None);
     };
     let Some(shift) = only_successor(model, scale)? else {
         return Ok(None);
     };
-    let Some(ins) = bin(model, shift, "Add") else {
-        return Ok(None);
-    };
-    let Some(beta) = with_const(model, ins, scale, c)? else {
+    let Some(beta) = channel_operand(model, shift, "Add", (scale, c))? else {
         return Ok(None);
     };
     // No step may broadcast the activations to another shape.

@@ -10,11 +10,10 @@
 //! accumulators, so the bits would differ. On the AVX-512 tier only, as [`gemm`].
 
 use tract_nnef::internal::*;
-use tract_nnef::tract_core::ops::binary::TypedBinOp;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
 use super::gemm::{self, MR, PackedB};
-use super::rewrite::replace_with_op;
+use super::rewrite::{const_operand, only_successor, replace_with_op};
 
 /// Tokens (rows of the product) from which a linear layer runs natively.
 pub const MIN_ROWS: usize = 8;
@@ -242,25 +241,16 @@ pub(crate) fn bias_after(
     id: usize,
     accepts: impl Fn(&[usize]) -> bool,
 ) -> TractResult<Option<(usize, Vec<f32>)>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
+    let Some(add_id) = only_successor(model, id)? else {
         return Ok(None);
-    }
-    let add_id = outlet.successors[0].node;
-    let add = model.node(add_id);
-    let is_add = add
-        .op_as::<TypedBinOp>()
-        .is_some_and(|b| b.0.name() == "Add" && b.1.is_none());
-    if !is_add || add.inputs.len() != 2 {
-        return Ok(None);
-    }
-    let other = if add.inputs[0].node == id { 1 } else { 0 };
-    let facts = model.node_input_facts(add_id)?;
-    let Some(b) = facts[other].konst.as_ref() else {
+    };
+    let Some((sum, b)) = const_operand(model, add_id, "Add")? else {
         return Ok(None);
     };
     let bias_like = b.datum_type() == f32::datum_type() && accepts(b.shape());
-    if !bias_like || model.outlet_fact(OutletId::new(add_id, 0))?.shape != facts[1 - other].shape {
+    let same_shape =
+        model.outlet_fact(OutletId::new(add_id, 0))?.shape == model.outlet_fact(sum)?.shape;
+    if sum.node != id || !bias_like || !same_shape {
         return Ok(None);
     }
     let plain = b.try_as_plain_ram()?;
@@ -318,6 +308,7 @@ mod tests {
     use super::*;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{assert_pass_keeps_stage_bits, bits, run_optimized};
+    use tract_nnef::tract_core::ops::binary::TypedBinOp;
     use tract_nnef::tract_core::ops::math;
 
     /// `x [lead.., k] . W (+ b)`, W stored `[k, n]` or (transposed) `[n, k]`.

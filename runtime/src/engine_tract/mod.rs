@@ -225,11 +225,7 @@ impl StageRunner {
             .map(|t| TValue::from_const(Arc::clone(t)))
             .collect();
         let state = &mut self.state;
-        let run = || {
-            multithread_tract_scope(executor.clone(), || {
-                state.run_plan_with_eval(inputs, vector_state::eval_node)
-            })
-        };
+        let run = || state.run_plan_with_eval(inputs, vector_state::eval_node);
         let results = match on_engine_threads(executor, run) {
             Ok(results) => results,
             Err(e) => {
@@ -257,15 +253,17 @@ impl StageRunner {
     }
 }
 
-/// Run `job` (a whole plan) on the engine's threads: on a pool, inside it, so the plan's serial
-/// ops run on one of its workers and its parallel ops split with the others. Run from the
-/// calling thread instead, a pool of N workers plus the caller made N + 1 threads on N cores:
-/// between parallel ops the idle workers spun beside the caller's serial ops (`test`'s
-/// satellite encoder ran slower on two threads than on one).
+/// Run `job` (a whole plan) on the engine's threads, `executor` installed as tract's (and the
+/// native ops') executor for it: on a pool, inside it, so the plan's serial ops run on one of
+/// its workers and its parallel ops split with the others. Run from the calling thread
+/// instead, a pool of N workers plus the caller made N + 1 threads on N cores: between
+/// parallel ops the idle workers spun beside the caller's serial ops (`test`'s satellite
+/// encoder ran slower on two threads than on one).
 fn on_engine_threads<R: Send>(executor: &Executor, job: impl FnOnce() -> R + Send) -> R {
+    let scoped = || multithread_tract_scope(executor.clone(), job);
     match executor {
-        Executor::MultiThread(pool) => pool.install(job),
-        _ => job(),
+        Executor::MultiThread(pool) => pool.install(scoped),
+        _ => scoped(),
     }
 }
 
@@ -550,18 +548,16 @@ impl TractEngine {
         let mut totals: Vec<(String, f64)> = Vec::new();
         let state = &mut r.state;
         let run = on_engine_threads(executor, || {
-            multithread_tract_scope(executor.clone(), || {
-                state.run_plan_with_eval(inputs, |ctx, op_state, node, node_inputs| {
-                    let t = std::time::Instant::now();
-                    let out = vector_state::eval_node(ctx, op_state, node, node_inputs);
-                    let ms = t.elapsed().as_secs_f64() * 1e3;
-                    let name = op_key(node.op());
-                    match totals.iter_mut().find(|(n, _)| *n == name) {
-                        Some((_, total)) => *total += ms,
-                        None => totals.push((name, ms)),
-                    }
-                    out
-                })
+            state.run_plan_with_eval(inputs, |ctx, op_state, node, node_inputs| {
+                let t = std::time::Instant::now();
+                let out = vector_state::eval_node(ctx, op_state, node, node_inputs);
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                let name = op_key(node.op());
+                match totals.iter_mut().find(|(n, _)| *n == name) {
+                    Some((_, total)) => *total += ms,
+                    None => totals.push((name, ms)),
+                }
+                out
             })
         });
         if let Err(e) = run {

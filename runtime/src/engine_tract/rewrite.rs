@@ -114,6 +114,30 @@ pub(crate) fn bin_inputs(model: &TypedModel, id: usize, name: &str) -> Option<[O
     (is && node.inputs.len() == 2).then(|| [node.inputs[0], node.inputs[1]])
 }
 
+/// If node `id` is the binary op `name` ([`bin_inputs`]) with exactly one constant operand: the
+/// other operand and the constant (a bias, a scale, a GELU or LayerNorm factor).
+///
+/// # Errors
+/// tract failing to give an operand's fact.
+pub(crate) fn const_operand(
+    model: &TypedModel,
+    id: usize,
+    name: &str,
+) -> TractResult<Option<(OutletId, Arc<Tensor>)>> {
+    let Some([i0, i1]) = bin_inputs(model, id, name) else {
+        return Ok(None);
+    };
+    let (k0, k1) = (
+        model.outlet_fact(i0)?.konst.clone(),
+        model.outlet_fact(i1)?.konst.clone(),
+    );
+    Ok(match (k0, k1) {
+        (None, Some(k)) => Some((i0, k)),
+        (Some(k), None) => Some((i1, k)),
+        _ => None,
+    })
+}
+
 /// The rewrites in the order [`optimise`] runs them (tract's optimiser between `Im2colStems`
 /// and `Fold`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
