@@ -30,6 +30,7 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::{Conv, PoolSpec};
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
+use super::epilogue::Epilogue;
 use super::gemm::{self, NR, PackedA};
 use super::rewrite::replace_with_op;
 
@@ -169,6 +170,8 @@ pub struct UnfoldConv {
     pub out_channels: usize,
     /// Whether input and output carry a batch axis of 1 (NCHW; CHW otherwise).
     pub batch_axis: bool,
+    /// The shortcut and ReLU after the bias ([`super::epilogue`]).
+    pub epilogue: Epilogue,
     weights: Arc<PackedA>,
     bias: Arc<Vec<f32>>,
 }
@@ -178,6 +181,7 @@ impl PartialEq for UnfoldConv {
         self.unfold == other.unfold
             && self.out_channels == other.out_channels
             && self.batch_axis == other.batch_axis
+            && self.epilogue == other.epilogue
             && Arc::ptr_eq(&self.weights, &other.weights)
             && Arc::ptr_eq(&self.bias, &other.bias)
     }
@@ -200,6 +204,15 @@ impl Op for UnfoldConv {
 }
 
 impl UnfoldConv {
+    /// This convolution with `epilogue` after its bias.
+    #[must_use]
+    pub fn with_epilogue(&self, epilogue: Epilogue) -> Self {
+        Self {
+            epilogue,
+            ..self.clone()
+        }
+    }
+
     /// `[1, C, H, W]` or `[C, H, W]`.
     fn input_shape(&self) -> TVec<usize> {
         let [c, h, w] = self.unfold.input;
@@ -225,7 +238,9 @@ impl EvalOp for UnfoldConv {
     op_out_of_plan!();
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        let x = args_1!(inputs);
+        let out_shape = self.output_shape();
+        let shortcut = self.epilogue.shortcut(&inputs, &out_shape)?;
+        let x = &inputs[0];
         let [c_n, _, _] = self.unfold.input;
         let [kh, kw] = self.unfold.kernel;
         let [oh, ow] = self.unfold.output;
@@ -238,7 +253,9 @@ impl EvalOp for UnfoldConv {
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let co = self.out_channels;
-        let mut out = gemm::output_tensor(&self.output_shape())?;
+        let shortcut = shortcut.map(|r| r.try_as_plain_ram()).transpose()?;
+        let shortcut = shortcut.as_ref().map(|r| r.as_slice::<f32>()).transpose()?;
+        let mut out = gemm::output_tensor(&out_shape)?;
         let mut po = out.try_as_plain_ram_mut()?;
         let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
             self.unfold.fill_panels(xs, (j, pc, kc), dst);
@@ -251,12 +268,11 @@ impl EvalOp for UnfoldConv {
             k: c_n * kh * kw,
             ldc: oh * ow,
         };
+        let finish = self
+            .epilogue
+            .finish(gemm::Bias::PerRow(&self.bias), shortcut);
         ensure!(
-            gemm::product(
-                &ops,
-                po.as_slice_mut::<f32>()?,
-                gemm::Bias::PerRow(&self.bias)
-            ),
+            gemm::product_then(&ops, po.as_slice_mut::<f32>()?, finish),
             "native product refused (AVX-512 missing or operands mis-sized)"
         );
         Ok(tvec!(out.into_tvalue()))
@@ -265,8 +281,7 @@ impl EvalOp for UnfoldConv {
 
 impl TypedOp for UnfoldConv {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        Ok(tvec!(f32::fact(&*self.output_shape())))
+        self.epilogue.output_facts(inputs, &self.output_shape())
     }
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
@@ -352,6 +367,7 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
             unfold,
             out_channels: co,
             batch_axis,
+            epilogue: Epilogue::default(),
             weights: Arc::new(weights),
             bias: Arc::new(bias_vals),
         };
@@ -471,6 +487,7 @@ mod tests {
             unfold,
             out_channels: 1,
             batch_axis: true,
+            epilogue: Epilogue::default(),
             weights: Arc::new(PackedA::from_row_major(&[0.5; 18], 1, 18)),
             bias: Arc::new(vec![0.0]),
         };

@@ -28,6 +28,7 @@ pub mod broadcast;
 pub mod contraction;
 pub mod conv_direct;
 pub mod conv_unfold;
+pub mod epilogue;
 pub mod fold;
 pub mod gelu;
 pub mod gemm;

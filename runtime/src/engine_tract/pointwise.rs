@@ -20,6 +20,7 @@
 use tract_nnef::internal::*;
 
 use super::conv_unfold::MIN_OUTPUT_CHANNELS;
+use super::epilogue::Epilogue;
 use super::gemm::{self, NR, PackedA};
 use super::linear::{ConstProduct, bias_after, const_product};
 use super::rewrite::replace_with_op;
@@ -37,6 +38,8 @@ pub struct PointwiseConv {
     pub output: TVec<usize>,
     /// Output channels, input channels, pixels.
     pub mkn: [usize; 3],
+    /// The shortcut and ReLU after the bias ([`super::epilogue`]).
+    pub epilogue: Epilogue,
     weights: Arc<PackedA>,
     bias: Option<Arc<Vec<f32>>>,
 }
@@ -46,6 +49,7 @@ impl PartialEq for PointwiseConv {
         self.input == other.input
             && self.output == other.output
             && self.mkn == other.mkn
+            && self.epilogue == other.epilogue
             && Arc::ptr_eq(&self.weights, &other.weights)
             && match (&self.bias, &other.bias) {
                 (None, None) => true,
@@ -68,11 +72,23 @@ impl Op for PointwiseConv {
     op_as_typed_op!();
 }
 
+impl PointwiseConv {
+    /// This convolution with `epilogue` after its bias.
+    #[must_use]
+    pub fn with_epilogue(&self, epilogue: Epilogue) -> Self {
+        Self {
+            epilogue,
+            ..self.clone()
+        }
+    }
+}
+
 impl EvalOp for PointwiseConv {
     op_out_of_plan!();
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        let x = args_1!(inputs);
+        let shortcut = self.epilogue.shortcut(&inputs, &self.output)?;
+        let x = &inputs[0];
         ensure!(
             x.shape() == &*self.input,
             "PointwiseConv input {:?}, expected {:?}",
@@ -82,6 +98,8 @@ impl EvalOp for PointwiseConv {
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let [m, k, n] = self.mkn;
+        let shortcut = shortcut.map(|r| r.try_as_plain_ram()).transpose()?;
+        let shortcut = shortcut.as_ref().map(|r| r.as_slice::<f32>()).transpose()?;
         let mut out = gemm::output_tensor(&self.output)?;
         let mut po = out.try_as_plain_ram_mut()?;
         // B's rows are the map's channel rows: panel columns copied, zeros past the last pixel.
@@ -108,7 +126,11 @@ impl EvalOp for PointwiseConv {
             None => gemm::Bias::None,
         };
         ensure!(
-            gemm::product(&ops, po.as_slice_mut::<f32>()?, bias),
+            gemm::product_then(
+                &ops,
+                po.as_slice_mut::<f32>()?,
+                self.epilogue.finish(bias, shortcut)
+            ),
             "native product refused (AVX-512 missing or operands mis-sized)"
         );
         Ok(tvec!(out.into_tvalue()))
@@ -117,8 +139,7 @@ impl EvalOp for PointwiseConv {
 
 impl TypedOp for PointwiseConv {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        Ok(tvec!(f32::fact(&*self.output)))
+        self.epilogue.output_facts(inputs, &self.output)
     }
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
@@ -242,6 +263,7 @@ pub fn native_pointwise_convs(mut model: TypedModel) -> TractResult<(TypedModel,
             input: pw.input.clone(),
             output: pw.output.clone(),
             mkn: [m, k, n],
+            epilogue: Epilogue::default(),
             weights: Arc::new(PackedA::from_row_major(w_plain.as_slice::<f32>()?, m, k)),
             bias: bias.as_ref().map(|(_, b)| Arc::new(b.clone())),
         };
@@ -309,6 +331,7 @@ mod tests {
             input: tvec![1, 2, 4, 8],
             output: tvec![1, 3, 4, 8],
             mkn: [3, 2, 32],
+            epilogue: Epilogue::default(),
             weights: Arc::new(PackedA::from_row_major(&[0.5; 6], 3, 2)),
             bias: None,
         };

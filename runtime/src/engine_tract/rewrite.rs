@@ -7,7 +7,8 @@
 //! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), the tanh GELUs ([`gelu`]), the
 //! LayerNorms ([`layer_norm`]), on the AVX-512 kernel tier the convolutions of 8 channels or
 //! more ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of
-//! channel-first maps ([`pointwise`]) on the native product ([`gemm`]), and (on the other
+//! channel-first maps ([`pointwise`]) on the native product ([`gemm`]), the ReLU and ResNet
+//! shortcut `Add` after those convolutions taken into them ([`epilogue`]), and (on the other
 //! tiers) the wide image stems, planned with im2col where tract would run them direct spatial
 //! ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
 //! outlets that depend on the weights alone, computed once ([`fold`]), and the binary ops
@@ -21,8 +22,8 @@ use tract_nnef::prelude::*;
 use tract_nnef::tract_core::ops::binary::TypedBinOp;
 
 use crate::engine_tract::{
-    attention, batched, bilinear, broadcast, contraction, conv_direct, conv_unfold, fold, gelu,
-    gemm, layer_norm, linear, max_pool, natural_consts, pointwise, softmax, weighted_sum,
+    attention, batched, bilinear, broadcast, contraction, conv_direct, conv_unfold, epilogue, fold,
+    gelu, gemm, layer_norm, linear, max_pool, natural_consts, pointwise, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
@@ -53,6 +54,9 @@ pub struct Rewrites {
     /// 1x1 convolutions of channel-first maps run as [`pointwise::PointwiseConv`]
     /// ([`pointwise::native_pointwise_convs`]; on the AVX-512 tier only).
     pub pointwise_convs: usize,
+    /// Native convolutions that took the shortcut `Add` and/or the `ReLU` after them
+    /// ([`epilogue::fuse_epilogues`]; on the AVX-512 tier only).
+    pub epilogues: usize,
     /// Products of two activations (attention) run as [`batched::BatchedProduct`]
     /// ([`batched::native_batched`]; on the AVX-512 tier only).
     pub native_batched: usize,
@@ -151,6 +155,7 @@ pub(crate) enum Pass {
     UnfoldConvs,
     NativeLinears,
     PointwiseConvs,
+    Epilogues,
     FusedAttention,
     NativeBatched,
     Im2colStems,
@@ -204,6 +209,9 @@ pub(crate) fn optimise_before(
     }
     if runs(Pass::PointwiseConvs) && native {
         (model, done.pointwise_convs) = pointwise::native_pointwise_convs(model)?;
+    }
+    if runs(Pass::Epilogues) && native {
+        (model, done.epilogues) = epilogue::fuse_epilogues(model)?;
     }
     if runs(Pass::FusedAttention) && native {
         (model, done.fused_attentions) = attention::fuse_attention(model)?;

@@ -94,6 +94,10 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // Convolutions of 8 channels or more: the tiny ResNet's (its stem too), the Swin's patch
     // embedding and the satellite FPN's, the decoder's input projection.
     let convs = if avx512 { [10, 0, 0, 4, 1] } else { [0; 5] };
+    // Native convolutions that took the ReLU or shortcut + ReLU after them (AVX-512 only): the
+    // ResNet stem and both convolutions of each of its four blocks, the satellite encoder's
+    // six ReLU'd convolutions, the decoder's input projection.
+    let epilogues = if avx512 { [9, 0, 0, 6, 1] } else { [0; 5] };
     // LayerNorms, on every tier: bev_query's two, bev_encoder's two, the Swin's (two a block,
     // the patch mergings' and the four feature outputs'), the decoder's (three a layer and
     // its heads').
@@ -105,6 +109,7 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
         pointwise_convs: pointwise[stage as usize],
         native_batched: batched[stage as usize],
         unfolded_convs: convs[stage as usize],
+        epilogues: epilogues[stage as usize],
         ..Rewrites::default()
     };
     match stage {

@@ -20,6 +20,28 @@ pub enum TileBias<'a> {
     PerCol(&'a [f32]),
 }
 
+/// What a tile does to its finished sums (after its last block of `k`), in the order tract's
+/// graph computes them: the convolution's or linear layer's bias, then a residual (`Add` of
+/// another tensor of C's shape), then a floor (`Max` with a scalar: ReLU), each one f32 step.
+#[derive(Clone, Copy, Debug)]
+pub struct TileFinish<'a> {
+    /// The bias.
+    pub bias: TileBias<'a>,
+    /// Values added after the bias, from the tile's first (row `r` at `r * ld`): `(values, ld)`.
+    pub residual: Option<(&'a [f32], usize)>,
+    /// `max(v, floor)` last, as Rust's `f32::max` computes it on x86 (tract's kernel).
+    pub floor: Option<f32>,
+}
+
+impl TileFinish<'_> {
+    /// Nothing after the sums.
+    pub const NONE: TileFinish<'static> = TileFinish {
+        bias: TileBias::None,
+        residual: None,
+        floor: None,
+    };
+}
+
 /// One tile's place in C and its block of `k`.
 pub struct Tile<'a> {
     /// `kc x MR` packed values of A.
@@ -36,8 +58,8 @@ pub struct Tile<'a> {
     pub cols: usize,
     /// Continue the sums stored in C (every block of `k` but the first).
     pub accumulate: bool,
-    /// Added after the last block.
-    pub bias: TileBias<'a>,
+    /// Applied after the last block ([`TileFinish::NONE`] on the others).
+    pub finish: TileFinish<'a>,
 }
 
 /// Whether this CPU runs [`run`].
@@ -64,27 +86,31 @@ pub fn run(t: Tile<'_>) -> bool {
         rows,
         cols,
         accumulate,
-        bias,
+        finish,
     } = t;
     let kc = a.len() / MR;
     let sized = (1..=MR).contains(&rows)
         && (1..=NR).contains(&cols)
         && b.len() >= kc * NR
         && c.len() >= (rows - 1) * ldc + cols
-        && match bias {
+        && match finish.bias {
             TileBias::None => true,
             TileBias::PerRow(v) => v.len() >= rows,
             TileBias::PerCol(v) => v.len() >= cols,
-        };
+        }
+        && finish
+            .residual
+            .is_none_or(|(v, ld)| ld >= cols && v.len() >= (rows - 1) * ld + cols);
     if !sized || !available() {
         return false;
     }
     #[cfg(target_arch = "x86_64")]
     // SAFETY: AVX-512F is present (checked above) and every pointer the kernel forms stays
     // inside the slices (checked above): `kc` steps of MR values of `a` and NR of `b`, rows
-    // `< rows` of C at `ldc` apart with lanes `< cols` (masked), bias lanes `< rows` / `< cols`.
+    // `< rows` of C at `ldc` apart with lanes `< cols` (masked), bias lanes `< rows` / `< cols`,
+    // residual rows `< rows` at `ld` apart with lanes `< cols` (masked).
     unsafe {
-        avx512::tile(a, b, c.as_mut_ptr(), (ldc, rows, cols, accumulate), bias);
+        avx512::tile(a, b, c.as_mut_ptr(), (ldc, rows, cols, accumulate), finish);
     }
     true
 }
@@ -93,7 +119,7 @@ pub fn run(t: Tile<'_>) -> bool {
 mod avx512 {
     use core::arch::x86_64::*;
 
-    use super::{MR, NR, TileBias};
+    use super::{MR, NR, TileBias, TileFinish};
 
     /// Values of A ahead of the current step the kernel prefetches: 32 steps, ~400 cycles.
     const A_PREFETCH: usize = 32 * MR;
@@ -142,7 +168,7 @@ mod avx512 {
         b: &[f32],
         c: *mut f32,
         (ldc, rows, cols, accumulate): (usize, usize, usize, bool),
-        bias: TileBias<'_>,
+        finish: TileFinish<'_>,
     ) {
         const _: () = assert!(MR == 12 && NR == 32);
         let kc = a.len() / MR;
@@ -185,7 +211,7 @@ mod avx512 {
                 ap = ap.add(MR);
                 bp = bp.add(NR);
             }
-            match bias {
+            match finish.bias {
                 TileBias::None => {}
                 TileBias::PerRow(b) => {
                     macro_rules! row_bias {
@@ -210,6 +236,37 @@ mod avx512 {
                     }
                     rows!(col_bias);
                 }
+            }
+            if let Some((res, ld)) = finish.residual {
+                let p = res.as_ptr();
+                macro_rules! residual {
+                    ($r:literal) => {
+                        if $r < rows {
+                            let q = p.add($r * ld);
+                            let v0 = _mm512_maskz_loadu_ps(m0, q);
+                            let v1 = _mm512_maskz_loadu_ps(m1, q.add(16));
+                            acc[$r][0] = _mm512_add_ps(acc[$r][0], v0);
+                            acc[$r][1] = _mm512_add_ps(acc[$r][1], v1);
+                        }
+                    };
+                }
+                rows!(residual);
+            }
+            if let Some(floor) = finish.floor {
+                // LLVM's x86 lowering of `f32::max(v, s)` (tract's by-scalar Max): `vmaxps(s,
+                // v)`, which is `s > v ? s : v` (so `v` for NaN and for equal zeros), then `s`
+                // where `v` is NaN.
+                let s = _mm512_set1_ps(floor);
+                macro_rules! floor {
+                    ($r:literal) => {
+                        for half in 0..2 {
+                            let v = acc[$r][half];
+                            let nan = _mm512_cmp_ps_mask::<_CMP_UNORD_Q>(v, v);
+                            acc[$r][half] = _mm512_mask_blend_ps(nan, _mm512_max_ps(s, v), s);
+                        }
+                    };
+                }
+                rows!(floor);
             }
             macro_rules! store {
                 ($r:literal) => {

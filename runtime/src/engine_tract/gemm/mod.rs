@@ -20,7 +20,7 @@ pub mod pack;
 use rayon::prelude::*;
 use tract_linalg::multithread::{Executor, current_tract_executor};
 
-pub use kernel::{TileBias, available};
+pub use kernel::{TileBias, TileFinish, available};
 pub use pack::{AlignedBuf, MR, NR, PackedA, PackedB, panels};
 
 /// `k` a block: 12 x 256 f32 of an A panel (12 KiB) stay in L1 across a column block.
@@ -41,6 +41,53 @@ pub enum Bias<'a> {
     PerRow(&'a [f32]),
     /// `n` values, one a column of C (a linear layer's outputs).
     PerCol(&'a [f32]),
+}
+
+/// What the product does to its finished sums, in tract's order ([`TileFinish`]): the bias,
+/// then a residual, then a floor.
+#[derive(Clone, Copy, Debug)]
+pub struct Finish<'a> {
+    /// The bias.
+    pub bias: Bias<'a>,
+    /// A dense `m x n` tensor (row stride `n`) added after the bias: a ResNet block's shortcut.
+    pub residual: Option<&'a [f32]>,
+    /// `max(v, floor)` last (ReLU), as tract's by-scalar `Max` computes it.
+    pub floor: Option<f32>,
+}
+
+impl<'a> From<Bias<'a>> for Finish<'a> {
+    fn from(bias: Bias<'a>) -> Self {
+        Self {
+            bias,
+            residual: None,
+            floor: None,
+        }
+    }
+}
+
+impl Finish<'_> {
+    /// The finish of one value: `sum` at row `r`, column `col` of an `n`-column product.
+    fn scalar(&self, sum: f32, (r, col, n): (usize, usize, usize)) -> f32 {
+        let mut v = match self.bias {
+            Bias::None => sum,
+            Bias::PerRow(b) => sum + b[r],
+            Bias::PerCol(b) => sum + b[col],
+        };
+        if let Some(res) = self.residual {
+            v += res[r * n + col];
+        }
+        match self.floor {
+            Some(s) => floor(v, s),
+            None => v,
+        }
+    }
+}
+
+/// `v.max(s)` with the bits the kernel's floor and LLVM's x86 lowering of `f32::max` give it
+/// ([`kernel`]): `s` for a NaN `v`, else `s > v ? s : v` (so `v` for equal zeros).
+#[must_use]
+pub fn floor(v: f32, s: f32) -> f32 {
+    if v.is_nan() || s > v { s } else { v }
 }
 
 /// `fill(j, pc, kc, dst)` of [`BSource::Fill`].
@@ -89,12 +136,20 @@ impl Operands<'_> {
 
 /// The product into `c` (`m` rows of `n` values, row `r` at `r * ldc`, [`Operands::c_len`]
 /// long; the values between rows untouched) on the engine's threads, split as `blocks`
-/// says. `false` (C in an unspecified state)
+/// says, `bias` added to the finished sums. `false` (C in an unspecified state)
 /// for operands or a bias shorter than their sizes, or a CPU without AVX-512: the rewrites that
 /// plan this product check both, so that is a bug, never input.
 #[must_use]
 pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
+    product_then(ops, c, bias.into())
+}
+
+/// [`product`] with a residual and a floor after the bias ([`Finish`]); `false` also for a
+/// residual shorter than `m x n`.
+#[must_use]
+pub fn product_then(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
+    let bias = finish.bias;
     let n_panels = panels(n, NR);
     let sized = a.len() >= panels(m, MR) * MR * k
         && match b {
@@ -105,7 +160,8 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
             Bias::None => true,
             Bias::PerRow(v) => v.len() >= m,
             Bias::PerCol(v) => v.len() >= n,
-        };
+        }
+        && finish.residual.is_none_or(|res| res.len() >= m * n);
     if !sized || ldc < n || c.len() != ops.c_len() || !available() {
         return false;
     }
@@ -115,11 +171,7 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
     if k == 0 {
         for (r, row) in c.chunks_mut(ldc).enumerate() {
             for (col, v) in row[..n].iter_mut().enumerate() {
-                *v = match bias {
-                    Bias::None => 0.0,
-                    Bias::PerRow(b) => 0.0 + b[r],
-                    Bias::PerCol(b) => 0.0 + b[col],
-                };
+                *v = finish.scalar(0.0, (r, col, n));
             }
         }
         return true;
@@ -128,7 +180,7 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
         BSource::Fill(_) => NC_PANELS.min(n_panels) * KC.min(k) * NR,
         BSource::Packed(_) => 0,
     };
-    pack::with_scratch(scratch_len, |scratch| blocks(ops, c, bias, scratch))
+    pack::with_scratch(scratch_len, |scratch| blocks(ops, c, finish, scratch))
 }
 
 /// [`product`]'s blocks, B's filled into `scratch` where it is filled.
@@ -139,18 +191,18 @@ pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
 /// does a packed B with fewer row panels than column panels (the Swin's last stages: 28 tokens
 /// against 3072 x 768 weights, where each thread then reads its share of the weights only).
 /// Otherwise (a linear layer over many tokens) the rows of C split.
-fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]) -> bool {
+fn blocks(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>, scratch: &mut [f32]) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
     // Inside a pool task already (an op's own split): the product stays on that thread.
     let parallel = worth_threads(m * n * k) && !in_task();
     let tasks = 2 * threads();
     if k > KC && n_panels * k * NR <= WHOLE_B_MAX {
-        return rows_outer(ops, c, bias, parallel, tasks);
+        return rows_outer(ops, c, finish, parallel, tasks);
     }
     let few_rows = panels(m, MR) < n_panels;
     if parallel && n_panels >= tasks && (matches!(b, BSource::Fill(_)) || few_rows) {
-        return column_split(ops, c, bias, n_panels.div_ceil(tasks).min(NC_PANELS));
+        return column_split(ops, c, finish, n_panels.div_ceil(tasks).min(NC_PANELS));
     }
     let rows_per_task = MR * panels(m, MR).div_ceil(tasks).max(1);
     for jc in (0..n_panels).step_by(NC_PANELS) {
@@ -184,7 +236,7 @@ fn blocks(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, scratch: &mut [f32]
                     a,
                     (t * rows_per_task / MR, rows_here, rows),
                     (n, k, ldc),
-                    bias,
+                    finish,
                 )
             });
             if !done {
@@ -208,7 +260,7 @@ pub const WHOLE_B_MAX: usize = 384 * 1024;
 fn rows_outer(
     ops: &Operands<'_>,
     c: &mut [f32],
-    bias: Bias<'_>,
+    finish: Finish<'_>,
     parallel: bool,
     tasks: usize,
 ) -> bool {
@@ -230,7 +282,7 @@ fn rows_outer(
                         b: BlockB::Whole(whole, k),
                     };
                     let here = MR.min(rows_here - ii * MR);
-                    block.tiles(a, (first, here, &mut *panel_rows), (n, k, ldc), bias)
+                    block.tiles(a, (first, here, &mut *panel_rows), (n, k, ldc), finish)
                 })
             })
         })
@@ -238,16 +290,43 @@ fn rows_outer(
     match b {
         BSource::Packed(all) => run(all, c),
         BSource::Fill(fill) => pack::with_scratch(n_panels * k * NR, |whole| {
-            on_threads(parallel, whole, FILL_PANELS * k * NR, |t, dst| {
-                fill(t * FILL_PANELS, 0, k, dst);
-                true
-            }) && run(whole, c)
+            fill_whole(fill, whole, (n_panels, k), parallel.then_some(tasks));
+            run(whole, c)
         }),
     }
 }
 
+/// B whole (`n_panels` panels of depth `k`) filled into `whole`, split over `tasks` on the
+/// pool where given: by panel and, with fewer panels than tasks, by depth within a panel
+/// (ResNet's last stage has 2 panels of 4,608 rows: filled by panel, half the threads
+/// waited).
+fn fill_whole(
+    fill: &FillPanels<'_>,
+    whole: &mut [f32],
+    (n_panels, k): (usize, usize),
+    tasks: Option<usize>,
+) {
+    let parts = tasks.map_or(1, |t| t.div_ceil(n_panels));
+    let depth = k.div_ceil(parts);
+    let mut pieces: Vec<(usize, usize, &mut [f32])> = Vec::with_capacity(n_panels * parts);
+    for (j, panel) in whole.chunks_mut(k * NR).enumerate() {
+        for (q, dst) in panel.chunks_mut(depth * NR).enumerate() {
+            pieces.push((j, q * depth, dst));
+        }
+    }
+    let one = |(j, pc, dst): (usize, usize, &mut [f32])| fill(j, pc, dst.len() / NR, dst);
+    match current_tract_executor() {
+        Executor::MultiThread(pool) if tasks.is_some() => pool.install(|| {
+            pieces
+                .into_par_iter()
+                .for_each(|piece| as_task(|| one(piece)));
+        }),
+        _ => pieces.into_iter().for_each(one),
+    }
+}
+
 /// [`blocks`] split by columns: tasks of `per_task` B panels on the pool.
-fn column_split(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, per_task: usize) -> bool {
+fn column_split(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>, per_task: usize) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
     let shared = std::sync::Mutex::new(c);
@@ -279,7 +358,7 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>, per_task: usi
                         }
                     },
                 };
-                if !block.tiles(a, (0, m, &mut local[..]), (n, k, cols), bias) {
+                if !block.tiles(a, (0, m, &mut local[..]), (n, k, cols), finish) {
                     return false;
                 }
             }
@@ -333,7 +412,7 @@ impl Block<'_> {
         a: &[f32],
         (first, rows_here, rows): (usize, usize, &mut [f32]),
         (n, k, ldc): (usize, usize, usize),
-        bias: Bias<'_>,
+        finish: Finish<'_>,
     ) -> bool {
         let Self { pc, kc, .. } = *self;
         let last = pc + kc == k;
@@ -345,11 +424,20 @@ impl Block<'_> {
                     BlockB::Whole(all, depth) => &all[(j * depth + pc) * NR..][..kc * NR],
                     BlockB::Block(blk) => &blk[(j - self.js.start) * kc * NR..][..kc * NR],
                 };
-                let tile_bias = match bias {
-                    _ if !last => TileBias::None,
-                    Bias::None => TileBias::None,
-                    Bias::PerRow(v) => TileBias::PerRow(&v[i * MR..]),
-                    Bias::PerCol(v) => TileBias::PerCol(&v[j * NR..]),
+                let tile_finish = if last {
+                    TileFinish {
+                        bias: match finish.bias {
+                            Bias::None => TileBias::None,
+                            Bias::PerRow(v) => TileBias::PerRow(&v[i * MR..]),
+                            Bias::PerCol(v) => TileBias::PerCol(&v[j * NR..]),
+                        },
+                        // The residual is dense and global: its tile at row i * MR, column
+                        // j * NR, whatever part of C this block writes.
+                        residual: finish.residual.map(|res| (&res[i * MR * n + j * NR..], n)),
+                        floor: finish.floor,
+                    }
+                } else {
+                    TileFinish::NONE
                 };
                 let done = kernel::run(kernel::Tile {
                     a: a_blk,
@@ -359,7 +447,7 @@ impl Block<'_> {
                     rows: MR.min(rows_here - ii * MR),
                     cols: NR.min(n - j * NR),
                     accumulate: pc > 0,
-                    bias: tile_bias,
+                    finish: tile_finish,
                 });
                 if !done {
                     return false;
@@ -463,7 +551,7 @@ mod tests {
             .collect()
     }
 
-    fn chain(a: &[f32], b: &[f32], m: usize, n: usize, k: usize, bias: Bias<'_>) -> Vec<u32> {
+    fn chain(a: &[f32], b: &[f32], m: usize, n: usize, k: usize, finish: Finish<'_>) -> Vec<u32> {
         let mut out = Vec::with_capacity(m * n);
         for r in 0..m {
             for c in 0..n {
@@ -471,26 +559,27 @@ mod tests {
                 for kk in 0..k {
                     acc = a[r * k + kk].mul_add(b[kk * n + c], acc);
                 }
-                let v = match bias {
-                    Bias::None => acc,
-                    Bias::PerRow(v) => acc + v[r],
-                    Bias::PerCol(v) => acc + v[c],
-                };
-                out.push(v.to_bits());
+                out.push(finish.scalar(acc, (r, c, n)).to_bits());
             }
         }
         out
     }
 
     fn run(m: usize, n: usize, k: usize, per_row: bool) -> (Vec<u32>, Vec<u32>) {
-        let a = values(m * k, 1 + m as u64);
-        let b = values(k * n, 2 + n as u64);
         let bias_v = values(m.max(n), 3);
         let bias = if per_row {
             Bias::PerRow(&bias_v)
         } else {
             Bias::PerCol(&bias_v)
         };
+        run_then(m, n, k, bias.into())
+    }
+
+    /// The product of (m, n, k) with `finish` through every B source and a wider C, and the
+    /// scalar chain's bits.
+    fn run_then(m: usize, n: usize, k: usize, finish: Finish<'_>) -> (Vec<u32>, Vec<u32>) {
+        let a = values(m * k, 1 + m as u64);
+        let b = values(k * n, 2 + n as u64);
         let pa = PackedA::from_row_major(&a, m, k);
         let pb = PackedB::from_row_major(&b, k, n);
         let mut ops = Operands {
@@ -502,7 +591,7 @@ mod tests {
             ldc: n,
         };
         let mut c = vec![f32::NAN; m * n];
-        assert!(product(&ops, &mut c, bias), "{m} x {n} x {k}");
+        assert!(product_then(&ops, &mut c, finish), "{m} x {n} x {k}");
         let got: Vec<u32> = c.iter().map(|v| v.to_bits()).collect();
         // B filled block by block gives the same bits.
         let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {
@@ -512,12 +601,12 @@ mod tests {
         };
         ops.b = BSource::Fill(&fill);
         let mut c2 = vec![f32::NAN; m * n];
-        assert!(product(&ops, &mut c2, bias), "{m} x {n} x {k}");
+        assert!(product_then(&ops, &mut c2, finish), "{m} x {n} x {k}");
         assert_eq!(got, c2.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
         // Into a wider C (row stride n + 5): the same values, the gaps untouched.
         ops.ldc = n + 5;
         let mut wide = vec![f32::NAN; ops.c_len()];
-        assert!(product(&ops, &mut wide, bias), "{m} x {n} x {k}");
+        assert!(product_then(&ops, &mut wide, finish), "{m} x {n} x {k}");
         for (r, row) in wide.chunks(n + 5).enumerate() {
             let want: Vec<u32> = got[r * n..][..n].to_vec();
             assert_eq!(
@@ -526,7 +615,86 @@ mod tests {
             );
             assert!(row[n..].iter().all(|v| v.is_nan()));
         }
-        (got, chain(&a, &b, m, n, k, bias))
+        (got, chain(&a, &b, m, n, k, finish))
+    }
+
+    #[test]
+    fn finishes_add_the_residual_and_floor_after_the_bias_bit_for_bit() {
+        if !available() {
+            return;
+        }
+        let pool = std::sync::Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap(),
+        );
+        // Every split: rows (few columns, deep), whole B (`rows_outer`), columns (filled B),
+        // and edges in m and n.
+        for (m, n, k) in [(25, 70, 257), (100, 70, 600), (30, 2100, 520), (13, 33, 7)] {
+            let bias = values(m, 3);
+            let mut residual = values(m * n, 4);
+            // A NaN residual makes a NaN sum: the floor gives the floor for it.
+            residual[n + 1] = f32::NAN;
+            for floor in [Some(0.0), Some(-0.25), None] {
+                let finish = Finish {
+                    bias: Bias::PerRow(&bias),
+                    residual: Some(&residual),
+                    floor,
+                };
+                let (got, want) = run_then(m, n, k, finish);
+                assert_eq!(got, want, "{m} x {n} x {k}, floor {floor:?}");
+                let two = tract_linalg::multithread::multithread_tract_scope(
+                    Executor::MultiThread(pool.clone()),
+                    || run_then(m, n, k, finish).0,
+                );
+                assert_eq!(two, want, "{m} x {n} x {k} on two threads");
+                if floor == Some(0.0) && k > 0 {
+                    assert_eq!(got[n + 1], 0.0f32.to_bits());
+                    assert!(got.iter().all(|&v| f32::from_bits(v) >= 0.0));
+                }
+            }
+        }
+        // A residual shorter than m x n is refused.
+        let pa = PackedA::from_row_major(&[1.0; 6], 3, 2);
+        let pb = PackedB::from_row_major(&[1.0; 8], 2, 4);
+        let ops = Operands {
+            a: pa.as_slice(),
+            b: BSource::Packed(pb.as_slice()),
+            m: 3,
+            n: 4,
+            k: 2,
+            ldc: 4,
+        };
+        let short = Finish {
+            bias: Bias::None,
+            residual: Some(&[0.0; 11]),
+            floor: None,
+        };
+        assert!(!product_then(&ops, &mut [0.0; 12], short));
+    }
+
+    #[test]
+    fn the_floor_is_rusts_f32_max_on_this_target() {
+        // tract's by-scalar Max is `v.max(s)` compiled for x86; `black_box` keeps LLVM from
+        // folding it at compile time (its constant folder orders the zeros, the hardware does
+        // not).
+        let vs = [
+            0.0,
+            -0.0,
+            1.5,
+            -1.5,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e-40,
+        ];
+        for &v in &vs {
+            for &s in &vs {
+                let (bv, bs) = (std::hint::black_box(v), std::hint::black_box(s));
+                assert_eq!(floor(v, s).to_bits(), bv.max(bs).to_bits(), "max({v}, {s})");
+            }
+        }
     }
 
     #[test]

@@ -1,0 +1,329 @@
+//! What a native convolution does to its finished sums besides the bias: a ResNet block's
+//! shortcut `Add` and the `ReLU` after it, taken into the product's last store.
+//!
+//! After decluttering, ResNet's `conv -> ReLU` is a convolution followed by `Max` with a scalar
+//! zero, and a block's `conv -> Add(shortcut) -> ReLU` an `Add` of the shortcut and that `Max`.
+//! Run as tract ops they are passes of their own over the whole map (`paper`'s image encoder:
+//! `OptBinChain(Add+Max)` 28 ms and `OptMaxByScalar` 13 ms of 614 ms on one thread, on maps
+//! that left L2 between the convolution and them, and on one thread while the products ran
+//! on all). [`fuse_epilogues`] takes them into the [`UnfoldConv`] or [`PointwiseConv`] before
+//! them: the product's micro-kernel adds the shortcut and applies the floor to each tile while
+//! it is still in registers ([`gemm::Finish`]).
+//!
+//! Bit for bit: the graph computes `((sum + bias) + shortcut).max(0)`, one f32 step each, and
+//! so does the kernel, in that order; the `max` with tract's bits (its by-scalar `Max` is
+//! Rust's `f32::max` compiled for x86: [`gemm::floor`]). This module's tests check ResNet
+//! blocks built here and every stage of the committed default bundle against tract's plan.
+
+use tract_nnef::internal::*;
+
+use super::conv_unfold::UnfoldConv;
+use super::gemm;
+use super::pointwise::PointwiseConv;
+use super::rewrite::{bin_inputs, only_successor, replace_with_op};
+
+/// The steps a native convolution takes after its bias.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Epilogue {
+    /// A shortcut of the output's shape is added (the op's second input).
+    pub residual: bool,
+    /// `max(v, floor)` last.
+    pub floor: Option<f32>,
+}
+
+impl PartialEq for Epilogue {
+    fn eq(&self, other: &Self) -> bool {
+        self.residual == other.residual
+            && self.floor.map(f32::to_bits) == other.floor.map(f32::to_bits)
+    }
+}
+impl Eq for Epilogue {}
+
+impl Epilogue {
+    /// Whether there is no step at all.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        !self.residual && self.floor.is_none()
+    }
+
+    /// The op's inputs: the map first, then the shortcut where there is one.
+    #[must_use]
+    pub fn inputs(&self) -> usize {
+        1 + usize::from(self.residual)
+    }
+
+    /// The shortcut among an op's `inputs`, checked against the op's `output` shape: `None`
+    /// without a residual step.
+    ///
+    /// # Errors
+    /// A missing shortcut, or one of another shape or type (the plan's, so a bug).
+    pub fn shortcut<'a>(
+        &self,
+        inputs: &'a [TValue],
+        output: &[usize],
+    ) -> TractResult<Option<&'a TValue>> {
+        ensure!(
+            inputs.len() == self.inputs(),
+            "{} inputs, expected {}",
+            inputs.len(),
+            self.inputs()
+        );
+        if !self.residual {
+            return Ok(None);
+        }
+        let r = &inputs[1];
+        ensure!(
+            r.shape() == output && r.datum_type() == f32::datum_type(),
+            "shortcut {:?} {:?}, expected f32 {output:?}",
+            r.datum_type(),
+            r.shape()
+        );
+        Ok(Some(r))
+    }
+
+    /// The product's finish: `bias`, then `residual`'s values, then the floor.
+    #[must_use]
+    pub fn finish<'a>(
+        &self,
+        bias: gemm::Bias<'a>,
+        residual: Option<&'a [f32]>,
+    ) -> gemm::Finish<'a> {
+        gemm::Finish {
+            bias,
+            residual,
+            floor: self.floor,
+        }
+    }
+
+    /// The op's output facts: `output` in f32, after checking the input facts.
+    ///
+    /// # Errors
+    /// Inputs of another count, type or (shortcut) shape.
+    pub fn output_facts(
+        &self,
+        inputs: &[&TypedFact],
+        output: &[usize],
+    ) -> TractResult<TVec<TypedFact>> {
+        ensure!(inputs.len() == self.inputs());
+        ensure!(inputs.iter().all(|f| f.datum_type == f32::datum_type()));
+        if self.residual {
+            ensure!(inputs[1].shape.as_concrete() == Some(output));
+        }
+        Ok(tvec!(f32::fact(output)))
+    }
+}
+
+/// The native convolutions that take an [`Epilogue`].
+enum Finishable<'a> {
+    Unfold(&'a UnfoldConv),
+    Pointwise(&'a PointwiseConv),
+}
+
+impl Finishable<'_> {
+    fn of(node: &TypedNode) -> Option<Finishable<'_>> {
+        if let Some(op) = node.op_as::<UnfoldConv>() {
+            Some(Finishable::Unfold(op))
+        } else {
+            node.op_as::<PointwiseConv>().map(Finishable::Pointwise)
+        }
+    }
+
+    fn epilogue(&self) -> Epilogue {
+        match self {
+            Finishable::Unfold(op) => op.epilogue,
+            Finishable::Pointwise(op) => op.epilogue,
+        }
+    }
+
+    fn with(&self, epilogue: Epilogue) -> Box<dyn TypedOp> {
+        match self {
+            Finishable::Unfold(op) => Box::new(op.with_epilogue(epilogue)),
+            Finishable::Pointwise(op) => Box::new(op.with_epilogue(epilogue)),
+        }
+    }
+}
+
+/// Take into each [`UnfoldConv`] and [`PointwiseConv`] of `model` without an epilogue the
+/// `Add` of a non-constant f32 tensor of its output's shape that is its one consumer, and then
+/// (or instead) the `Max` with a constant f32 scalar on the right that consumes that; returns
+/// the model and the number of convolutions that took one.
+///
+/// # Errors
+/// tract refusing a patch or a fact (an inconsistent model).
+pub fn fuse_epilogues(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
+    let mut done = 0;
+    for id in model.eval_order()? {
+        let node = model.node(id);
+        let Some(conv) = Finishable::of(node) else {
+            continue;
+        };
+        if !conv.epilogue().is_empty() {
+            continue;
+        }
+        let out = OutletId::new(id, 0);
+        let Some(shape) = model.outlet_fact(out)?.shape.as_concrete().map(TVec::from) else {
+            continue;
+        };
+        let mut epilogue = Epilogue::default();
+        let mut inputs: TVec<OutletId> = node.inputs.iter().copied().collect();
+        let mut last = out;
+        if let Some(next) = only_successor(&model, last.node)?
+            && let Some([a, b]) = bin_inputs(&model, next, "Add")
+        {
+            let other = if a == last { b } else { a };
+            let fact = model.outlet_fact(other)?;
+            if other != last
+                && (a == last || b == last)
+                && fact.konst.is_none()
+                && fact.datum_type == f32::datum_type()
+                && fact.shape.as_concrete() == Some(&shape)
+                && model
+                    .outlet_fact(OutletId::new(next, 0))?
+                    .shape
+                    .as_concrete()
+                    == Some(&shape)
+            {
+                epilogue.residual = true;
+                inputs.push(other);
+                last = OutletId::new(next, 0);
+            }
+        }
+        if let Some(next) = only_successor(&model, last.node)?
+            && let Some([a, b]) = bin_inputs(&model, next, "Max")
+            && a == last
+            && let Some(k) = &model.outlet_fact(b)?.konst
+            && k.datum_type() == f32::datum_type()
+            && k.len() == 1
+            && k.rank() <= shape.len()
+            && model
+                .outlet_fact(OutletId::new(next, 0))?
+                .shape
+                .as_concrete()
+                == Some(&shape)
+        {
+            epilogue.floor = Some(k.cast_to_scalar::<f32>()?);
+            last = OutletId::new(next, 0);
+        }
+        if epilogue.is_empty() {
+            continue;
+        }
+        let op = conv.with(epilogue);
+        let name = format!("{}.epilogue", model.node(last.node).name);
+        replace_with_op(&mut model, &inputs, last.node, name, op)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The pass against tract's plan, bit for bit: ResNet blocks built here (a 3x3 and a 1x1
+    //! convolution, with and without the shortcut) and every stage of the committed default
+    //! bundle.
+    use super::*;
+    use crate::engine_tract::rewrite::Pass;
+    use crate::engine_tract::test_support::{
+        ConvShape, assert_pass_keeps_stage_bits, bits, conv_model, on_two_threads, run_optimized,
+    };
+    use crate::engine_tract::{conv_unfold, pointwise};
+    use tract_nnef::tract_core::ops::math;
+
+    /// `conv_model(s)` with, after the convolution, `Add(conv, shortcut)` (the shortcut a
+    /// second input) when `residual`, then `Max(_, floor)`.
+    fn block(s: &ConvShape, residual: bool, floor: f32) -> (TypedModel, TVec<TValue>) {
+        let (mut model, mut inputs) = conv_model(s);
+        let mut y = model.output_outlets().unwrap()[0];
+        let shape: TVec<usize> = model
+            .outlet_fact(y)
+            .unwrap()
+            .shape
+            .as_concrete()
+            .unwrap()
+            .into();
+        if residual {
+            let r = model.add_source("shortcut", f32::fact(&shape)).unwrap();
+            y = model.wire_node("add", math::add(), &[y, r]).unwrap()[0];
+            // Shortcut values of both signs around the sums, a NaN among them.
+            let mut v: Vec<f32> = (0..shape.iter().product::<usize>())
+                .map(|i| ((i * 7919) % 101) as f32 / 25.0 - 2.0)
+                .collect();
+            v[3] = f32::NAN;
+            inputs.push(Tensor::from_shape(&shape, &v).unwrap().into_tvalue());
+        }
+        let k = model
+            .add_const(
+                "floor",
+                tensor0(floor).broadcast_into_rank(shape.len()).unwrap(),
+            )
+            .unwrap();
+        y = model.wire_node("relu", math::max(), &[y, k]).unwrap()[0];
+        model.select_output_outlets(&[y]).unwrap();
+        (model, inputs)
+    }
+
+    #[test]
+    fn resnet_blocks_take_their_shortcut_and_relu_with_tracts_bits() {
+        if !gemm::available() {
+            eprintln!("no AVX-512 here: the native convolutions do not run on this CPU");
+            return;
+        }
+        for s in [
+            ConvShape::new(32, 64, [24, 40], 3, 1, 1),
+            ConvShape::new(64, 128, [12, 20], 1, 1, 0),
+            ConvShape::new(16, 13, [7, 9], 3, 1, 1),
+        ] {
+            for residual in [false, true] {
+                for floor in [0.0, -0.5] {
+                    let (model, inputs) = block(&s, residual, floor);
+                    let native = conv_unfold::unfold_convs(model.clone()).unwrap().0;
+                    let native = pointwise::native_pointwise_convs(native).unwrap().0;
+                    let (fused, n) = fuse_epilogues(native).unwrap();
+                    let what = format!("{} -> {} k{} residual {residual}", s.ci, s.co, s.k);
+                    assert_eq!(n, 1, "{what}");
+                    assert!(
+                        !fused.nodes().iter().any(|n| n.op.name() == "Max"),
+                        "{what}"
+                    );
+                    let want = run_optimized(model, &inputs);
+                    let got = run_optimized(fused.clone(), &inputs);
+                    assert_eq!(bits(&got[0]), bits(&want[0]), "{what}");
+                    let two = on_two_threads(|| run_optimized(fused, &inputs));
+                    assert_eq!(bits(&two[0]), bits(&want[0]), "{what} on two threads");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn other_consumers_are_left_alone() {
+        // The Max's constant on the left and a non-scalar floor: tract's plan stays.
+        let s = ConvShape::new(32, 64, [24, 40], 3, 1, 1);
+        let (mut model, _) = conv_model(&s);
+        let y = model.output_outlets().unwrap()[0];
+        let k = model
+            .add_const("floor", tensor0(0.0f32).broadcast_into_rank(4).unwrap())
+            .unwrap();
+        let z = model.wire_node("relu", math::max(), &[k, y]).unwrap()[0];
+        model.select_output_outlets(&[z]).unwrap();
+        let native = conv_unfold::unfold_convs(model).unwrap().0;
+        assert_eq!(fuse_epilogues(native).unwrap().1, 0);
+    }
+
+    #[test]
+    fn a_missing_shortcut_is_an_error_value() {
+        let e = Epilogue {
+            residual: true,
+            floor: Some(0.0),
+        };
+        let x = Tensor::zero::<f32>(&[1, 2, 3]).unwrap().into_tvalue();
+        assert!(e.shortcut(&[x.clone()], &[1, 2, 3]).is_err());
+        let wrong = Tensor::zero::<f32>(&[1, 2, 4]).unwrap().into_tvalue();
+        assert!(e.shortcut(&[x.clone(), wrong], &[1, 2, 3]).is_err());
+        assert!(e.shortcut(&[x.clone(), x], &[1, 2, 3]).unwrap().is_some());
+    }
+
+    #[test]
+    fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
+        assert_pass_keeps_stage_bits(Pass::Epilogues, fuse_epilogues);
+    }
+}
