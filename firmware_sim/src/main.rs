@@ -47,7 +47,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    satmap_sim::arena::system_malloc::share_one_arena();
+    satmap_sim::arena::system_malloc::keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::BuildPack(args) => satmap_sim::cli::build_pack::run(&args),

@@ -1,24 +1,38 @@
-//! The host's system allocator (glibc's malloc) told to keep one arena for every thread.
+//! The host's system allocator (glibc's malloc) told to keep what it is given back, the way the
+//! ECU's fixed arena does.
 //!
 //! Outside the fixed arena (`bench-stages`, the tools, a drive before `init`) the engine's
-//! activations come from glibc's malloc. Since the engine runs each plan on a worker of its own
-//! pool (`TractEngine::set_threads`), glibc gave those threads arenas of their own, which hand
-//! large freed blocks back to the kernel: the next run's outputs were fresh pages again. `test`'s
-//! decoder on two threads read 18-23 ms in most runs against 11-13 ms in the others (the
-//! self-attention's `[4, 1000, 1000]` scores product 4-5 ms against 1 ms), and 10.7-12.8 ms in
-//! every run with one arena (`GLIBC_TUNABLES=glibc.malloc.arena_max=1`, 2026-12-05). The ECU
-//! build allocates from the TLSF arena, which has no per-thread arenas; this is the host's
-//! equivalent.
+//! activations come from glibc's malloc, which by default hands large freed blocks back to the
+//! kernel: each run's outputs were then fresh pages, and a page fault costs ~12 us on this kind
+//! of virtual machine (the first pass over a fresh 256 MiB buffer ran at 0.7 GB/s, the next
+//! at 24). Two ways it did:
+//! - per-thread arenas: since the engine runs each plan on a worker of its own pool
+//!   (`TractEngine::set_threads`), glibc gave those threads arenas of their own, which trim
+//!   freed memory. `test`'s decoder on two threads read 18-23 ms in most runs against 11-13
+//!   ms in the others, and 10.7-12.8 ms in every run with one arena (2026-12-05);
+//! - blocks above the mmap threshold (grown to 32 MiB at most), mapped for each allocation and
+//!   unmapped when freed: `paper`'s image encoder has 24 MiB maps. 8,400 page faults a run of
+//!   its five stages, 1,500 with every block from the heap and the heap never trimmed
+//!   (`perf stat -e page-faults`, `bench-stages --repeats 1` against `5`).
+//!
+//! The ECU build allocates from the TLSF arena, which does neither; this is the host's
+//! equivalent (what onnxruntime's own arena does for it, too).
 
-/// Ask glibc's malloc for a single arena shared by all threads (`M_ARENA_MAX = 1`). Call at
-/// start-up, before the engine's threads have arenas of their own; a no-op off glibc. Returns
-/// whether glibc took it.
-pub fn share_one_arena() -> bool {
+/// Ask glibc's malloc for one arena shared by all threads (`M_ARENA_MAX = 1`), every block from
+/// that arena's heap (`M_MMAP_MAX = 0`: no block mapped on its own) and the heap never
+/// trimmed (`M_TRIM_THRESHOLD` at its maximum): freed memory is reused, never handed back.
+/// Call at start-up, before the engine's threads have arenas of their own; a no-op off glibc.
+/// Returns whether glibc took all three.
+pub fn keep_freed_memory() -> bool {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     {
         // SAFETY: mallopt sets an allocator parameter under glibc's own lock; it takes no
         // pointers and touches no memory of ours.
-        unsafe { libc::mallopt(libc::M_ARENA_MAX, 1) == 1 }
+        unsafe {
+            libc::mallopt(libc::M_ARENA_MAX, 1) == 1
+                && libc::mallopt(libc::M_MMAP_MAX, 0) == 1
+                && libc::mallopt(libc::M_TRIM_THRESHOLD, libc::c_int::MAX) == 1
+        }
     }
     #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
     {
@@ -31,9 +45,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn glibc_takes_the_setting() {
+    fn glibc_takes_the_settings() {
         assert_eq!(
-            share_one_arena(),
+            keep_freed_memory(),
             cfg!(all(target_os = "linux", target_env = "gnu"))
         );
     }
