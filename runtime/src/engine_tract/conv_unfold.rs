@@ -204,6 +204,23 @@ impl Op for UnfoldConv {
 }
 
 impl UnfoldConv {
+    /// The convolution over `unfold`'s patches with `out_channels` x (channels x taps) weights
+    /// `weights` (row-major) and one bias an output channel, no epilogue.
+    #[must_use]
+    pub fn new(unfold: Unfold, batch_axis: bool, weights: &[f32], bias: Vec<f32>) -> Self {
+        let out_channels = bias.len();
+        let [c, _, _] = unfold.input;
+        let [kh, kw] = unfold.kernel;
+        Self {
+            unfold,
+            out_channels,
+            batch_axis,
+            epilogue: Epilogue::default(),
+            weights: Arc::new(PackedA::from_row_major(weights, out_channels, c * kh * kw)),
+            bias: Arc::new(bias),
+        }
+    }
+
     /// This convolution with `epilogue` after its bias.
     #[must_use]
     pub fn with_epilogue(&self, epilogue: Epilogue) -> Self {
@@ -348,7 +365,6 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
         if kernel.shape() != [co, ci, kh, kw] {
             continue;
         }
-        let k = ci * kh * kw;
         let Some(unfold) = Unfold::of_pool(&conv.pool_spec, [ci, h, w]) else {
             continue;
         };
@@ -362,15 +378,12 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
             continue;
         };
         let kernel_plain = kernel.try_as_plain_ram()?;
-        let weights = PackedA::from_row_major(kernel_plain.as_slice::<f32>()?, co, k);
-        let op = UnfoldConv {
+        let op = UnfoldConv::new(
             unfold,
-            out_channels: co,
             batch_axis,
-            epilogue: Epilogue::default(),
-            weights: Arc::new(weights),
-            bias: Arc::new(bias_vals),
-        };
+            kernel_plain.as_slice::<f32>()?,
+            bias_vals,
+        );
         let x = node.inputs[0];
         replace_with_op(&mut model, &[x], id, format!("{name}.unfold_conv"), op)?;
         done += 1;
