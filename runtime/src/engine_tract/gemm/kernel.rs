@@ -110,7 +110,14 @@ pub fn run(t: Tile<'_>) -> bool {
     // `< rows` of C at `ldc` apart with lanes `< cols` (masked), bias lanes `< rows` / `< cols`,
     // residual rows `< rows` at `ld` apart with lanes `< cols` (masked).
     unsafe {
-        avx512::tile(a, b, c.as_mut_ptr(), (ldc, rows, cols, accumulate), finish);
+        let shape = (ldc, rows, cols, accumulate);
+        // A panel's last rows past `m` are zeros: a tile of 4 or 8 rows skips their
+        // multiply-adds (a 64-channel convolution is 5 full panels and one of 4 rows).
+        match rows {
+            ..=4 => avx512::tile::<4>(a, b, c.as_mut_ptr(), shape, finish),
+            5..=8 => avx512::tile::<8>(a, b, c.as_mut_ptr(), shape, finish),
+            _ => avx512::tile::<MR>(a, b, c.as_mut_ptr(), shape, finish),
+        }
     }
     true
 }
@@ -162,8 +169,8 @@ mod avx512 {
 
     #[target_feature(enable = "avx512f")]
     /// `a`, `b` hold `kc` steps of the panels; `c` and `(ldc, rows, cols, accumulate)` as in
-    /// [`super::Tile`].
-    pub(super) unsafe fn tile(
+    /// [`super::Tile`]; the multiply-adds of the first `R >= rows` rows only.
+    pub(super) unsafe fn tile<const R: usize>(
         a: &[f32],
         b: &[f32],
         c: *mut f32,
@@ -202,9 +209,11 @@ mod avx512 {
                 let b1 = _mm512_maskz_loadu_ps(all, bp.add(16));
                 macro_rules! step {
                     ($r:literal) => {
-                        let x = _mm512_set1_ps(*ap.add($r));
-                        acc[$r][0] = _mm512_fmadd_ps(x, b0, acc[$r][0]);
-                        acc[$r][1] = _mm512_fmadd_ps(x, b1, acc[$r][1]);
+                        if $r < R {
+                            let x = _mm512_set1_ps(*ap.add($r));
+                            acc[$r][0] = _mm512_fmadd_ps(x, b0, acc[$r][0]);
+                            acc[$r][1] = _mm512_fmadd_ps(x, b1, acc[$r][1]);
+                        }
                     };
                 }
                 rows!(step);
