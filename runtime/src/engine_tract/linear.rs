@@ -12,6 +12,7 @@
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
+use super::epilogue::Epilogue;
 use super::gemm::{self, MR, PackedB};
 use super::rewrite::{const_operand, only_successor, replace_with_op};
 
@@ -25,6 +26,8 @@ pub struct PackedLinear {
     pub input: TVec<usize>,
     /// Outputs a token.
     pub n: usize,
+    /// The residual `Add` and ReLU after the bias ([`super::epilogue`]).
+    pub epilogue: Epilogue,
     weights: Arc<PackedB>,
     bias: Option<Arc<Vec<f32>>>,
 }
@@ -33,6 +36,7 @@ impl PartialEq for PackedLinear {
     fn eq(&self, other: &Self) -> bool {
         self.input == other.input
             && self.n == other.n
+            && self.epilogue == other.epilogue
             && Arc::ptr_eq(&self.weights, &other.weights)
             && match (&self.bias, &other.bias) {
                 (None, None) => true,
@@ -44,6 +48,15 @@ impl PartialEq for PackedLinear {
 impl Eq for PackedLinear {}
 
 impl PackedLinear {
+    /// This layer with `epilogue` after its bias.
+    #[must_use]
+    pub fn with_epilogue(&self, epilogue: Epilogue) -> Self {
+        Self {
+            epilogue,
+            ..self.clone()
+        }
+    }
+
     fn k(&self) -> usize {
         self.input.last().copied().unwrap_or(0)
     }
@@ -77,17 +90,21 @@ impl EvalOp for PackedLinear {
     op_out_of_plan!();
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        let x = args_1!(inputs);
+        let out_shape = self.output_shape();
+        let residual = self.epilogue.shortcut(&inputs, &out_shape)?;
+        let x = &inputs[0];
         ensure!(
             x.shape() == &*self.input,
             "PackedLinear input {:?}",
             x.shape()
         );
+        let residual = residual.map(|r| r.try_as_plain_ram()).transpose()?;
+        let residual = residual.as_ref().map(|r| r.as_slice::<f32>()).transpose()?;
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let k = self.k();
         let m = xs.len() / k.max(1);
-        let mut out = gemm::output_tensor(&self.output_shape())?;
+        let mut out = gemm::output_tensor(&out_shape)?;
         let mut po = out.try_as_plain_ram_mut()?;
         let c = po.as_slice_mut::<f32>()?;
         let bias = match &self.bias {
@@ -108,7 +125,7 @@ impl EvalOp for PackedLinear {
                 k,
                 ldc: n,
             };
-            gemm::product(&ops, c, bias)
+            gemm::product_then(&ops, c, self.epilogue.finish(bias, residual))
         });
         ensure!(
             done,
@@ -120,8 +137,7 @@ impl EvalOp for PackedLinear {
 
 impl TypedOp for PackedLinear {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        Ok(tvec!(f32::fact(&*self.output_shape())))
+        self.epilogue.output_facts(inputs, &self.output_shape())
     }
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
@@ -285,6 +301,7 @@ pub fn native_linears(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
         let op = PackedLinear {
             input: layer.input.clone(),
             n: layer.n,
+            epilogue: Epilogue::default(),
             weights: Arc::new(PackedB::from_row_major(
                 w_plain.as_slice::<f32>()?,
                 k,
@@ -307,46 +324,10 @@ mod tests {
     //! of the committed default bundle.
     use super::*;
     use crate::engine_tract::rewrite::Pass;
-    use crate::engine_tract::test_support::{assert_pass_keeps_stage_bits, bits, run_optimized};
+    use crate::engine_tract::test_support::{
+        assert_pass_keeps_stage_bits, bits, linear_model, run_optimized,
+    };
     use tract_nnef::tract_core::ops::binary::TypedBinOp;
-    use tract_nnef::tract_core::ops::math;
-
-    /// `x [lead.., k] . W (+ b)`, W stored `[k, n]` or (transposed) `[n, k]`.
-    fn layer_model(lead: &[usize], k: usize, n: usize, transposed: bool, bias: bool) -> TypedModel {
-        let values = |len: usize, seed: usize| -> Vec<f32> {
-            (0..len)
-                .map(|i| ((i * 7919 + seed * 104_729) % 1013) as f32 / 500.0 - 1.0)
-                .collect()
-        };
-        let mut model = TypedModel::default();
-        let mut shape: Vec<usize> = lead.to_vec();
-        shape.push(k);
-        let x = model.add_source("x", f32::fact(&shape)).unwrap();
-        let (w_shape, w_axes) = if transposed {
-            ([n, k], "nk")
-        } else {
-            ([k, n], "kn")
-        };
-        let w = Tensor::from_shape(&w_shape, &values(k * n, 1)).unwrap();
-        let w = model.add_const("w", w).unwrap();
-        let lead_axes: String = "abc".chars().take(lead.len()).collect();
-        let expr = format!("{lead_axes}k,{w_axes}->{lead_axes}n");
-        let es = EinSum {
-            axes: expr.parse().unwrap(),
-            operating_dt: f32::datum_type(),
-            q_params: None,
-        };
-        let mut y = model.wire_node("mm", es, &[x, w]).unwrap()[0];
-        if bias {
-            let mut b_shape = vec![1; lead.len()];
-            b_shape.push(n);
-            let b = Tensor::from_shape(&b_shape, &values(n, 2)).unwrap();
-            let b = model.add_const("b", b).unwrap();
-            y = model.wire_node("add", math::add(), &[y, b]).unwrap()[0];
-        }
-        model.select_output_outlets(&[y]).unwrap();
-        model.into_decluttered().unwrap()
-    }
 
     #[test]
     fn linear_layers_run_natively_with_tracts_bits() {
@@ -360,7 +341,7 @@ mod tests {
             (vec![4, 50], 300, 33, false, false),
             (vec![9], 7, 2, true, false),
         ] {
-            let model = layer_model(&lead, k, n, transposed, bias);
+            let model = linear_model(&lead, k, n, transposed, bias);
             let (native, done) = native_linears(model.clone()).unwrap();
             assert_eq!(done, 1, "{lead:?} x {k} -> {n}");
             assert!(native.nodes().iter().any(|n| n.op_is::<PackedLinear>()));
@@ -389,7 +370,7 @@ mod tests {
     #[test]
     fn single_tokens_keep_tracts_plan() {
         // One token: tract's matrix-vector kernels sum k in another order.
-        let model = layer_model(&[1], 64, 64, false, true);
+        let model = linear_model(&[1], 64, 64, false, true);
         assert_eq!(native_linears(model).unwrap().1, 0);
     }
 
@@ -398,6 +379,7 @@ mod tests {
         let op = PackedLinear {
             input: tvec![4, 3],
             n: 2,
+            epilogue: Epilogue::default(),
             weights: Arc::new(PackedB::from_row_major(&[1.0; 6], 3, 2)),
             bias: None,
         };

@@ -94,10 +94,11 @@ pub(crate) fn committed_rewrites(stage: Stage) -> Rewrites {
     // Convolutions of 8 channels or more: the tiny ResNet's (its stem too), the Swin's patch
     // embedding and the satellite FPN's, the decoder's input projection.
     let convs = if avx512 { [10, 0, 0, 4, 1] } else { [0; 5] };
-    // Native convolutions that took the ReLU or shortcut + ReLU after them (AVX-512 only): the
-    // ResNet stem and both convolutions of each of its four blocks, the satellite encoder's
-    // six ReLU'd convolutions, the decoder's input projection.
-    let epilogues = if avx512 { [9, 0, 0, 6, 1] } else { [0; 5] };
+    // Native products that took the ReLU, the residual Add or both after them (AVX-512 only):
+    // the ResNet stem and both convolutions of each of its four blocks; the feed-forward and
+    // attention output layers' residuals and ReLUs of bev_query, bev_encoder and the decoder;
+    // the satellite encoder's ReLU'd convolutions and its Swin blocks' residuals.
+    let epilogues = if avx512 { [9, 3, 3, 11, 13] } else { [0; 5] };
     // LayerNorms, on every tier: bev_query's two, bev_encoder's two, the Swin's (two a block,
     // the patch mergings' and the four feature outputs'), the decoder's (three a layer and
     // its heads').
@@ -317,4 +318,49 @@ pub(crate) fn conv_model(s: &ConvShape) -> (TypedModel, TVec<TValue>) {
     model.select_output_outlets(&y).unwrap();
     let input = Tensor::from_shape(&shape, &conv_values(s.ci * h * w, 3)).unwrap();
     (model.into_decluttered().unwrap(), tvec![input.into()])
+}
+
+/// `x [lead.., k] . W (+ b)`, W stored `[k, n]` or (transposed) `[n, k]`.
+pub(crate) fn linear_model(
+    lead: &[usize],
+    k: usize,
+    n: usize,
+    transposed: bool,
+    bias: bool,
+) -> TypedModel {
+    let values = |len: usize, seed: usize| -> Vec<f32> {
+        (0..len)
+            .map(|i| ((i * 7919 + seed * 104_729) % 1013) as f32 / 500.0 - 1.0)
+            .collect()
+    };
+    let mut model = TypedModel::default();
+    let mut shape: Vec<usize> = lead.to_vec();
+    shape.push(k);
+    let x = model.add_source("x", f32::fact(&shape)).unwrap();
+    let (w_shape, w_axes) = if transposed {
+        ([n, k], "nk")
+    } else {
+        ([k, n], "kn")
+    };
+    let w = Tensor::from_shape(&w_shape, &values(k * n, 1)).unwrap();
+    let w = model.add_const("w", w).unwrap();
+    let lead_axes: String = "abc".chars().take(lead.len()).collect();
+    let expr = format!("{lead_axes}k,{w_axes}->{lead_axes}n");
+    let es = tract_nnef::tract_core::ops::einsum::EinSum {
+        axes: expr.parse().unwrap(),
+        operating_dt: f32::datum_type(),
+        q_params: None,
+    };
+    let mut y = model.wire_node("mm", es, &[x, w]).unwrap()[0];
+    if bias {
+        let mut b_shape = vec![1; lead.len()];
+        b_shape.push(n);
+        let b = Tensor::from_shape(&b_shape, &values(n, 2)).unwrap();
+        let b = model.add_const("b", b).unwrap();
+        y = model
+            .wire_node("add", tract_nnef::tract_core::ops::math::add(), &[y, b])
+            .unwrap()[0];
+    }
+    model.select_output_outlets(&[y]).unwrap();
+    model.into_decluttered().unwrap()
 }
