@@ -136,15 +136,28 @@ pub fn pack_a(a: &[f32], m: usize, k: usize, row_stride: usize, dst: &mut [f32])
 
 /// Panel `i` of [`pack_a`] into `panel` (`MR * k` values).
 pub fn pack_a_panel(a: &[f32], m: usize, k: usize, row_stride: usize, i: usize, panel: &mut [f32]) {
-    for r in 0..MR {
+    // Step by step in `k`, each step's 12 values written together: the panel is written once
+    // in order (row by row, it was written 12 times over at a 48-byte stride), the 12 rows
+    // read as 12 sequential streams.
+    let zeros = [0.0f32; 0];
+    let rows: [&[f32]; MR] = std::array::from_fn(|r| {
         let row = i * MR + r;
-        let dst = panel.chunks_exact_mut(MR).take(k).map(|d| &mut d[r]);
         if row < m {
-            for (d, &v) in dst.zip(&a[row * row_stride..][..k]) {
-                *d = v;
+            &a[row * row_stride..][..k]
+        } else {
+            &zeros
+        }
+    });
+    let full = rows.iter().all(|r| r.len() == k);
+    for (kk, dst) in panel.chunks_exact_mut(MR).take(k).enumerate() {
+        if full {
+            for (d, row) in dst.iter_mut().zip(&rows) {
+                *d = row[kk];
             }
         } else {
-            dst.for_each(|d| *d = 0.0);
+            for (d, row) in dst.iter_mut().zip(&rows) {
+                *d = row.get(kk).copied().unwrap_or(0.0);
+            }
         }
     }
 }
