@@ -329,7 +329,10 @@ fn fill_whole(
 fn column_split(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>, per_task: usize) -> bool {
     let Operands { a, b, m, n, k, ldc } = *ops;
     let n_panels = panels(n, NR);
-    let shared = std::sync::Mutex::new(c);
+    if c.len() < ops.c_len() {
+        return false;
+    }
+    let shared = DisjointColumns(c.as_mut_ptr());
     let task = |t: usize| -> bool {
         let js = t * per_task..((t + 1) * per_task).min(n_panels);
         let col0 = js.start * NR;
@@ -362,17 +365,41 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>, per_task:
                     return false;
                 }
             }
-            let Ok(mut c) = shared.lock() else {
-                return false;
-            };
             for (r, row) in local.chunks_exact(cols).enumerate() {
-                c[r * ldc + col0..][..cols].copy_from_slice(row);
+                // SAFETY: `c` spans `c_len()` values (checked above) and stays mutably
+                // borrowed by this function until every task has returned; row `r`'s columns
+                // `col0..col0 + cols` lie inside it (`r < m`, `col0 + cols <= n <= ldc`), and
+                // no other task writes them (tasks own disjoint column panels) or reads C.
+                unsafe {
+                    std::ptr::copy_nonoverlapping(row.as_ptr(), shared.at(r * ldc + col0), cols);
+                }
             }
             true
         })
     };
     on_pool(n_panels.div_ceil(per_task), task)
 }
+
+/// C's first value, shared by the tasks of [`column_split`], each of which writes its own
+/// columns only (so each copies its block into place without a lock: under one, the tasks'
+/// copies ran one after the other).
+struct DisjointColumns(*mut f32);
+
+impl DisjointColumns {
+    /// The pointer to value `i` of C (a method, so that a closure captures the whole `Sync`
+    /// wrapper rather than its raw pointer field).
+    ///
+    /// # Safety
+    /// `i` within C.
+    unsafe fn at(&self, i: usize) -> *mut f32 {
+        // SAFETY: the caller keeps `i` within C.
+        unsafe { self.0.add(i) }
+    }
+}
+
+// SAFETY: the pointer is only written through by `column_split`'s tasks, each at its own
+// columns of C, while `column_split` holds C's mutable borrow.
+unsafe impl Sync for DisjointColumns {}
 
 /// `task(i)` for `i` in `0..tasks`, on the engine's pool where there is one; `false` when a
 /// task returned it.
