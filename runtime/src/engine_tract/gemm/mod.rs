@@ -564,6 +564,7 @@ mod tests {
     //! `k` across block boundaries, and one and two threads.
     use super::*;
     use crate::engine_tract::gemm::pack::pack_a;
+    use crate::engine_tract::test_support::on_two_threads;
 
     /// Deterministic values in [-1, 1) with all mantissa bits in play.
     fn values(len: usize, seed: u64) -> Vec<f32> {
@@ -650,12 +651,6 @@ mod tests {
         if !available() {
             return;
         }
-        let pool = std::sync::Arc::new(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(2)
-                .build()
-                .unwrap(),
-        );
         // Every split: rows (few columns, deep), whole B (`rows_outer`), columns (filled B),
         // and edges in m and n.
         for (m, n, k) in [(25, 70, 257), (100, 70, 600), (30, 2100, 520), (13, 33, 7)] {
@@ -671,10 +666,7 @@ mod tests {
                 };
                 let (got, want) = run_then(m, n, k, finish);
                 assert_eq!(got, want, "{m} x {n} x {k}, floor {floor:?}");
-                let two = tract_linalg::multithread::multithread_tract_scope(
-                    Executor::MultiThread(pool.clone()),
-                    || run_then(m, n, k, finish).0,
-                );
+                let two = on_two_threads(|| run_then(m, n, k, finish).0);
                 assert_eq!(two, want, "{m} x {n} x {k} on two threads");
                 if floor == Some(0.0) && k > 0 {
                     assert_eq!(got[n + 1], 0.0f32.to_bits());
