@@ -71,3 +71,13 @@ def test_a_bundle_with_a_compiled_sibling_runs_it_too():
     assert peers._engines(spec) == peers.ENGINES + (peers.COMPILED,)
     cmd = peers._engine_cmd(peers.COMPILED, Path("sim"), spec, 1, 3)
     assert cmd[:4] == ["sim", "bench-stages", "--bundle", str(BUNDLE.with_name("test.satmap"))]
+
+
+def test_every_stage_runs_once_before_any_is_timed():
+    calls = []
+    runs = [(name, lambda name=name: calls.append(name)) for name in ("a", "b", "c")]
+    timed = peers._time_all(runs, repeats=2)
+    # One settling pass over all, then each stage's warm-up run and its two timed runs.
+    assert calls == ["a", "b", "c"] + ["a"] * 3 + ["b"] * 3 + ["c"] * 3
+    assert [name for name, _ in timed] == ["a", "b", "c"]
+    assert all(len(ms) == 2 and all(t >= 0.0 for t in ms) for _, ms in timed)
