@@ -373,7 +373,7 @@ mod tests {
             floor: Some(0.0),
         };
         let x = Tensor::zero::<f32>(&[1, 2, 3]).unwrap().into_tvalue();
-        assert!(e.shortcut(&[x.clone()], &[1, 2, 3]).is_err());
+        assert!(e.shortcut(std::slice::from_ref(&x), &[1, 2, 3]).is_err());
         let wrong = Tensor::zero::<f32>(&[1, 2, 4]).unwrap().into_tvalue();
         assert!(e.shortcut(&[x.clone(), wrong], &[1, 2, 3]).is_err());
         assert!(e.shortcut(&[x.clone(), x], &[1, 2, 3]).unwrap().is_some());
