@@ -156,10 +156,10 @@ impl Finishable<'_> {
     }
 }
 
-/// Take into each [`UnfoldConv`] and [`PointwiseConv`] of `model` without an epilogue the
-/// `Add` of a non-constant f32 tensor of its output's shape that is its one consumer, and then
-/// (or instead) the `Max` with a constant f32 scalar on the right that consumes that; returns
-/// the model and the number of convolutions that took one.
+/// Take into each [`UnfoldConv`], [`PointwiseConv`] and [`PackedLinear`] of `model` without an
+/// epilogue the `Add` of a non-constant f32 tensor of its output's shape that is its one
+/// consumer, and then (or instead) the `Max` with a constant f32 scalar on the right that
+/// consumes that; returns the model and the number of products that took one.
 ///
 /// # Errors
 /// tract refusing a patch or a fact (an inconsistent model).
