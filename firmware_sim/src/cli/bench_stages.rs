@@ -194,34 +194,33 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
     let mut bev = vec![0.0; d.bev_len()];
     let mut logits = vec![0.0; d.logits_len()];
     let mut points = vec![0.0; d.points_len()];
-    let mut stages_ms = Vec::new();
+    let mut time_stage = |stage: Stage, n: usize| -> Result<Vec<f64>> {
+        let e = &mut engine;
+        match stage {
+            Stage::ImageEncoder => time_ms(n, || Ok(e.encode_image(0, &r.image, &mut value)?)),
+            Stage::BevQuery => time_ms(n, || Ok(e.bev_query(&r.can_bus, &mut q, &mut w)?)),
+            Stage::BevEncoder => {
+                time_ms(n, || Ok(e.bev_encode(&r.query, &r.gathered, &mut bev)?))
+            }
+            Stage::SatelliteEncoder => time_ms(n, || Ok(e.encode_satellite(&r.crop, &mut bev)?)),
+            Stage::MapDecoder => time_ms(n, || {
+                Ok(e.decode_map(&r.camera_bev, &r.satellite_bev, &mut logits, &mut points)?)
+            }),
+        }
+    };
     // Every stage once before any is timed (then each its own warm-up run): the whole
     // bundle's load (hundreds of MB read, packed, freed) leaves the kernel busy for a while,
     // and the stage timed first read 30-35 ms instead of 23-24 in some processes (`nano`'s
-    // image encoder on two threads, 2026-12-05). The peers' workers do the same
-    // (`satmap_ref.peers`).
-    for repeats in [0, args.repeats] {
-        stages_ms.clear();
-        for stage in Stage::ALL {
-            let e = &mut engine;
-            let n = repeats;
-            let times = match stage {
-                Stage::ImageEncoder => time_ms(n, || Ok(e.encode_image(0, &r.image, &mut value)?))?,
-                Stage::BevQuery => time_ms(n, || Ok(e.bev_query(&r.can_bus, &mut q, &mut w)?))?,
-                Stage::BevEncoder => {
-                    time_ms(n, || Ok(e.bev_encode(&r.query, &r.gathered, &mut bev)?))?
-                }
-                Stage::SatelliteEncoder => {
-                    time_ms(n, || Ok(e.encode_satellite(&r.crop, &mut bev)?))?
-                }
-                Stage::MapDecoder => time_ms(n, || {
-                    Ok(e.decode_map(&r.camera_bev, &r.satellite_bev, &mut logits, &mut points)?)
-                })?,
-            };
-            stages_ms.push((stage.name(), times));
-        }
+    // image encoder on two threads, 2026-12-05). The PyTorch worker of `satmap_ref.peers`,
+    // which also builds the whole model at once, does the same.
+    for stage in Stage::ALL {
+        time_stage(stage, 0)?;
     }
     let n = args.repeats;
+    let mut stages_ms = Vec::new();
+    for stage in Stage::ALL {
+        stages_ms.push((stage.name(), time_stage(stage, n)?));
+    }
     let mut ops_ms = Vec::new();
     if args.ops {
         for stage in Stage::ALL {

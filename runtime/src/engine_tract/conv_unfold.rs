@@ -270,8 +270,6 @@ impl EvalOp for UnfoldConv {
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let co = self.out_channels;
-        let shortcut = shortcut.map(|r| r.try_as_plain_ram()).transpose()?;
-        let shortcut = shortcut.as_ref().map(|r| r.as_slice::<f32>()).transpose()?;
         let mut out = gemm::output_tensor(&out_shape)?;
         let mut po = out.try_as_plain_ram_mut()?;
         let fill = |j: usize, pc: usize, kc: usize, dst: &mut [f32]| {

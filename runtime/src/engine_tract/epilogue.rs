@@ -60,8 +60,8 @@ impl Epilogue {
         1 + usize::from(self.residual)
     }
 
-    /// The shortcut among an op's `inputs`, checked against the op's `output` shape: `None`
-    /// without a residual step.
+    /// The values of the shortcut among an op's `inputs`, checked against the op's `output`
+    /// shape: `None` without a residual step.
     ///
     /// # Errors
     /// A missing shortcut, or one of another shape or type (the plan's, so a bug).
@@ -69,7 +69,7 @@ impl Epilogue {
         &self,
         inputs: &'a [TValue],
         output: &[usize],
-    ) -> TractResult<Option<&'a TValue>> {
+    ) -> TractResult<Option<&'a [f32]>> {
         ensure!(
             inputs.len() == self.inputs(),
             "{} inputs, expected {}",
@@ -86,7 +86,7 @@ impl Epilogue {
             r.datum_type(),
             r.shape()
         );
-        Ok(Some(r))
+        Ok(Some(r.try_as_plain_ram()?.as_slice::<f32>()?))
     }
 
     /// The product's finish: `bias`, then `residual`'s values, then the floor.
@@ -180,21 +180,23 @@ pub fn fuse_epilogues(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
         let mut epilogue = Epilogue::default();
         let mut inputs: TVec<OutletId> = node.inputs.iter().copied().collect();
         let mut last = out;
+        // Whether node `id`'s output has the product's shape (no broadcast grew it).
+        let keeps_shape = |id: usize| -> TractResult<bool> {
+            Ok(model.outlet_fact(OutletId::new(id, 0))?.shape.as_concrete() == Some(&shape))
+        };
         if let Some(next) = only_successor(&model, last.node)?
             && let Some([a, b]) = bin_inputs(&model, next, "Add")
+            && let Some(other) = match (a == last, b == last) {
+                (true, false) => Some(b),
+                (false, true) => Some(a),
+                _ => None,
+            }
         {
-            let other = if a == last { b } else { a };
             let fact = model.outlet_fact(other)?;
-            if other != last
-                && (a == last || b == last)
-                && fact.konst.is_none()
+            if fact.konst.is_none()
                 && fact.datum_type == f32::datum_type()
                 && fact.shape.as_concrete() == Some(&shape)
-                && model
-                    .outlet_fact(OutletId::new(next, 0))?
-                    .shape
-                    .as_concrete()
-                    == Some(&shape)
+                && keeps_shape(next)?
             {
                 epilogue.residual = true;
                 inputs.push(other);
@@ -208,11 +210,7 @@ pub fn fuse_epilogues(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
             && k.datum_type() == f32::datum_type()
             && k.len() == 1
             && k.rank() <= shape.len()
-            && model
-                .outlet_fact(OutletId::new(next, 0))?
-                .shape
-                .as_concrete()
-                == Some(&shape)
+            && keeps_shape(next)?
         {
             epilogue.floor = Some(k.cast_to_scalar::<f32>()?);
             last = OutletId::new(next, 0);

@@ -98,8 +98,6 @@ impl EvalOp for PackedLinear {
             "PackedLinear input {:?}",
             x.shape()
         );
-        let residual = residual.map(|r| r.try_as_plain_ram()).transpose()?;
-        let residual = residual.as_ref().map(|r| r.as_slice::<f32>()).transpose()?;
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let k = self.k();

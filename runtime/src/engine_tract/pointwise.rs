@@ -107,8 +107,6 @@ impl EvalOp for PointwiseConv {
         let px = x.try_as_plain_ram()?;
         let xs = px.as_slice::<f32>()?;
         let [m, k, n] = self.mkn;
-        let shortcut = shortcut.map(|r| r.try_as_plain_ram()).transpose()?;
-        let shortcut = shortcut.as_ref().map(|r| r.as_slice::<f32>()).transpose()?;
         let mut out = gemm::output_tensor(&self.output)?;
         let mut po = out.try_as_plain_ram_mut()?;
         // B's rows are the map's channel rows: panel columns copied, zeros past the last pixel.
