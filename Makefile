@@ -120,16 +120,10 @@ $(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # other dependency features and recompile tract (~7 min).
 CAPI_LIB := target/debug/deps/libsatmap_capi.a
 C_REPLAY := target/c/replay
-# f32 results are bit-identical on one family of tract kernels, not across families (vector
-# widths change summation order): the digests are kept per family, the rule of
-# engine_tract::kernel_family (and satmap_ref.golden.kernel_family) read off /proc/cpuinfo:
-# <vendor>-<tier>, TRACT_X86_KIND overriding the vendor as it does in tract.
-KERNEL_VENDOR := $(if $(TRACT_X86_KIND),$(if $(filter intel amd,$(TRACT_X86_KIND)),$(TRACT_X86_KIND),other),$(shell if grep -qm1 GenuineIntel /proc/cpuinfo; then echo intel; \
-  elif grep -qm1 AuthenticAMD /proc/cpuinfo; then echo amd; else echo other; fi))
-KERNEL_FAMILY := $(KERNEL_VENDOR)-$(shell if grep -qw avx512f /proc/cpuinfo; then echo avx512f; \
-  elif grep -qw avx2 /proc/cpuinfo && grep -qw fma /proc/cpuinfo; then echo fma; else echo generic; fi)
+# The replay compares with examples/c/expected-<family>.txt, the family named by the library
+# itself (satmap_kernel_family(), the one rule in runtime/src/engine_tract/kernel_family.rs).
 C_REPLAY_ARGS := models/bundles/test.satmap models/calibration/nuscenes_like.toml examples/c/scenario.bin \
-  examples/c/expected-$(KERNEL_FAMILY).txt
+  examples/c
 test-c:
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
 	mkdir -p target/c

@@ -44,6 +44,8 @@ enum Command {
     Compile(satmap_sim::cli::compile::Args),
     /// Time every stage and the step of a bundle on its reference inputs (JSON; `make bench-peers`).
     BenchStages(satmap_sim::cli::bench_stages::Args),
+    /// Print the family of graph kernels this CPU runs (the suffix of per-family digest files).
+    KernelFamily,
 }
 
 fn main() -> std::process::ExitCode {
@@ -62,6 +64,10 @@ fn main() -> std::process::ExitCode {
         Command::CheckBundle(args) => satmap_sim::cli::check_bundle::run(&args),
         Command::Compile(args) => satmap_sim::cli::compile::run(&args),
         Command::BenchStages(args) => satmap_sim::cli::bench_stages::run(&args),
+        Command::KernelFamily => {
+            println!("{}", satmap_runtime::engine_tract::kernel_family());
+            Ok(())
+        }
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -4,8 +4,6 @@
 //! golden inputs; `SATMAP_BLESS=1` rewrites it and `expected-<kernel family>.txt`, the Rust
 //! run's digests on this CPU's family of tract kernels, that the C example compares against).
 
-use crate::common;
-
 use std::ffi::CString;
 use std::path::PathBuf;
 
@@ -499,89 +497,4 @@ fn the_c_api_computes_the_rust_run_and_protects_its_output() {
         );
         satmap_capi::satmap_destroy(rt);
     }
-}
-
-#[test]
-fn every_camera_dropped_in_turn_matches_the_reference() {
-    let f = GoldenFrame::load(0);
-    let dropout = common::Golden::load("dropout.safetensors");
-    let mut map = SatMap::new(
-        compiled_engine(),
-        &calibration(),
-        SwitchCrop(Some(f.satellite.clone())),
-    )
-    .unwrap();
-    let configs: Vec<(String, u8)> = (0..6)
-        .map(|c| (format!("cam{c}"), 0b11_1111 & !(1u8 << c)))
-        .chain([("front_only".to_string(), 0b1)])
-        .collect();
-    let tol = 1e-4;
-    for (k, (name, present)) in configs.iter().enumerate() {
-        let s = Step {
-            sequence: k as u64 + 1,
-            set: 0,
-            present: *present,
-            satellite: true,
-            staged: false,
-        };
-        let out = map.step(&frame(&f, s)).unwrap().clone();
-        for (stage, got) in [
-            ("gathered", map.gathered()),
-            ("camera_bev", map.camera_bev()),
-            ("class_logits", map.logits()),
-            ("points", map.points()),
-        ] {
-            let want = dropout.f32s(&format!("{name}_{stage}"));
-            let d = common::max_abs_diff(got, &want);
-            println!("dropout {name} {stage}: max abs diff {d:.2e}");
-            assert!(d <= tol, "{name} {stage}: max abs diff {d} > {tol}");
-        }
-        // The health word names exactly the cameras left out.
-        assert_eq!(out.health.cameras_dropped(), !present & 0b11_1111, "{name}");
-        for c in 0..6 {
-            let want = if present >> c & 1 == 1 {
-                CameraState::Used
-            } else {
-                CameraState::Missing
-            };
-            assert_eq!(out.health.cameras[c], want, "{name} camera {c}");
-        }
-    }
-    // Stale and invalid images are left out the same way, with their own states.
-    let s = Step {
-        sequence: 8,
-        set: 0,
-        present: 0b11_1111,
-        satellite: true,
-        staged: false,
-    };
-    let mut fr = frame(&f, s);
-    let stale_us = fr.timestamp_us - FrameLimits::DEFAULT.max_camera_age_us - 1;
-    if let Some(a) = fr.images[1].as_mut() {
-        a.capture_us = stale_us;
-    }
-    if let Some(b) = fr.images[2].as_mut() {
-        b.valid = false;
-    }
-    let out = map.step(&fr).unwrap().clone();
-    assert_eq!(out.health.cameras[1], CameraState::Stale);
-    assert_eq!(out.health.cameras[2], CameraState::Invalid);
-    // With every camera gone the step fails and the runtime stays usable.
-    let none = Frame {
-        sequence: 9,
-        timestamp_us: fr.timestamp_us + 1,
-        images: [None; 6],
-        ..fr
-    };
-    assert!(matches!(
-        map.step(&none),
-        Err(satmap_runtime::StepError::NoCameraLeft { .. })
-    ));
-    let again = Step { sequence: 10, ..s };
-    let mut again_frame = frame(&f, again);
-    again_frame.timestamp_us = fr.timestamp_us + 2;
-    for im in again_frame.images.iter_mut().flatten() {
-        im.capture_us = again_frame.timestamp_us;
-    }
-    assert!(map.step(&again_frame).is_ok());
 }

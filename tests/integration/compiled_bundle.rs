@@ -2,17 +2,18 @@
 //! bundle compiled to one NNEF archive steps bit-identically to the ONNX folder and within the
 //! goldens' tolerance; the committed `test.satmap` is current; a flipped byte, a graph whose
 //! inputs are swapped and a layout too small are refused; the ECU build of the runtime carries
-//! no ONNX front end; and the f16 and int8 bundles step within measured bounds of f32, per stage
-//! and in map space over a replay.
+//! no ONNX front end; the committed f16 and int8 bundles are current, and their maps stay within
+//! measured bounds of f32 over a replay (their per-stage bounds are the ECU tests', run on every
+//! target: `tests/ecu/tests/precisions.rs`).
 
 use crate::common;
 
 use std::sync::OnceLock;
 
-use crate::common::{GoldenFrame, bundle_dir, calibration, max_abs_diff};
+use crate::common::{bundle_dir, max_abs_diff};
+use satmap_ecu_tests::golden::compiled_path;
 use satmap_layout::MemoryLayout;
 use satmap_runtime::InitError;
-use satmap_runtime::SatMap;
 use satmap_runtime::bundle::archive::write_archive;
 use satmap_runtime::bundle::compile::{CompileError, compile, stage_entry_name};
 use satmap_runtime::bundle::{
@@ -21,7 +22,6 @@ use satmap_runtime::bundle::{
 use satmap_runtime::capacity::layout;
 use satmap_runtime::engine::Stage;
 use satmap_runtime::engine_tract::TractEngine;
-use satmap_runtime::satellite::FixedCrop;
 
 /// The parity bound of `golden_step.rs`, against the onnxruntime reference.
 const STAGE_TOL: f32 = 1e-4;
@@ -52,29 +52,7 @@ fn open_compiled(bytes: &[u8]) -> Result<Bundle, BundleError> {
 
 /// Every stage buffer after stepping each of the two golden frames through `bundle`.
 fn stage_buffers(bundle: &Bundle) -> Vec<(String, Vec<f32>, Vec<f32>)> {
-    let mut out = Vec::new();
-    for index in 0..2 {
-        let f = GoldenFrame::load(index);
-        let engine = TractEngine::load(bundle).unwrap();
-        let mut map = SatMap::new(engine, &calibration(), FixedCrop(&f.satellite)).unwrap();
-        let d = map.dims();
-        let (w, h) = (d.image_w as u32, d.image_h as u32);
-        map.step(&f.frame(1, w, h)).unwrap();
-        for (name, got) in [
-            ("value", map.value()),
-            ("bev_query", map.query()),
-            ("gkt_weights", map.weights()),
-            ("gathered", map.gathered()),
-            ("camera_bev", map.camera_bev()),
-            ("satellite_bev", map.satellite_bev()),
-            ("class_logits", map.logits()),
-            ("points", map.points()),
-        ] {
-            let golden = f.golden.f32s(name);
-            out.push((format!("frame {index} {name}"), got.to_vec(), golden));
-        }
-    }
-    out
+    satmap_ecu_tests::parity::stage_buffers(|| TractEngine::load(bundle).unwrap())
 }
 
 /// The committed compiled `test` bundle, the default the demo and the C example load.
@@ -127,33 +105,61 @@ fn compiled_bundles_step_bit_identically_to_the_onnx_folder() {
     }
 }
 
-/// The committed compiled bundle was compiled from the committed folder as it is now (its
-/// `[compiled] source_digest`), with the folder's model and stage interfaces: re-run
-/// `satmap-sim compile --bundle models/bundles/test --out models/bundles/test.satmap` after a
-/// new export.
+/// The committed compiled bundles (`test.satmap`, `test-f16.satmap`, `test-int8.satmap`: the
+/// forms the ECU tests load on every target) were compiled from the committed folder as it is
+/// now (their `[compiled] source_digest`), at their precision, with the folder's model and stage
+/// interfaces: re-run `satmap-sim compile --bundle models/bundles/test --out
+/// models/bundles/test.satmap` (and `--precision f16|int8 --out models/bundles/test-<p>.satmap`)
+/// after a new export.
 #[test]
-fn the_committed_compiled_bundle_is_current() {
+fn the_committed_compiled_bundles_are_current() {
     let folder = Bundle::open(bundle_dir()).unwrap();
-    let bundle = Bundle::open(committed()).unwrap();
-    let from = bundle.manifest().compiled.as_ref().unwrap();
-    assert_eq!(
-        from.source_digest,
-        folder.digest().to_string(),
-        "models/bundles/test.satmap is stale: compile it again from models/bundles/test"
-    );
     assert!(folder.manifest().compiled.is_none());
-    assert_eq!(bundle.dims(), folder.dims());
-    for stage in Stage::ALL {
-        let (a, b) = (
-            bundle.manifest().stage(stage).unwrap(),
-            folder.manifest().stage(stage).unwrap(),
-        );
+    for precision in Precision::ALL {
+        let path = compiled_path(precision);
+        let bundle = Bundle::open(&path).unwrap();
+        assert_eq!(bundle.manifest().precision, precision, "{}", path.display());
+        let from = bundle.manifest().compiled.as_ref().unwrap();
         assert_eq!(
-            (&a.inputs, &a.outputs),
-            (&b.inputs, &b.outputs),
-            "{stage:?}"
+            from.source_digest,
+            folder.digest().to_string(),
+            "{} is stale: compile it again from models/bundles/test",
+            path.display()
         );
-        assert_eq!(a.file, stage_entry_name(stage));
+        assert_eq!(bundle.dims(), folder.dims());
+        for stage in Stage::ALL {
+            let (a, b) = (
+                bundle.manifest().stage(stage).unwrap(),
+                folder.manifest().stage(stage).unwrap(),
+            );
+            assert_eq!(
+                (&a.inputs, &a.outputs),
+                (&b.inputs, &b.outputs),
+                "{stage:?}"
+            );
+            assert_eq!(a.file, stage_entry_name(stage));
+        }
+    }
+}
+
+/// The committed f16 and int8 bundles step within [`COMMITTED_TOL`] of a fresh compile at their
+/// precision (the same rounding of the same weights; see [`COMMITTED_TOL`] on why not bit for
+/// bit on every CPU).
+#[test]
+fn the_committed_lower_precision_bundles_step_like_a_fresh_compile() {
+    for precision in [Precision::F16, Precision::Int8] {
+        let fresh = open_compiled(&compile_test_folder(precision)).unwrap();
+        let committed = Bundle::open(compiled_path(precision)).unwrap();
+        for ((name, a, _), (_, b, _)) in
+            stage_buffers(&fresh).iter().zip(&stage_buffers(&committed))
+        {
+            let d = max_abs_diff(a, b);
+            println!("{precision} {name}: committed vs fresh max abs diff {d:e}");
+            assert!(
+                d <= COMMITTED_TOL,
+                "{precision} {name}: {d:e} > {COMMITTED_TOL:e}"
+            );
+        }
     }
 }
 
@@ -372,91 +378,6 @@ fn the_ecu_build_has_no_onnx_front_end() {
     assert!(has(&tree("onnx"), "tract-onnx"));
 }
 
-/// The `test` bundle compiled to a lower precision once per test process.
-fn compiled_as(precision: Precision) -> &'static [u8] {
-    static F16: OnceLock<Vec<u8>> = OnceLock::new();
-    static INT8: OnceLock<Vec<u8>> = OnceLock::new();
-    match precision {
-        Precision::F32 => compiled(),
-        Precision::F16 => F16.get_or_init(|| compile_test_folder(Precision::F16)),
-        Precision::Int8 => INT8.get_or_init(|| compile_test_folder(Precision::Int8)),
-    }
-}
-
-/// Largest deviation of the f16 bundle from the f32 one per stage buffer, over both golden
-/// frames of the trained `test` weights: measured (2026-12-01) and doubled. The f16 bundle is
-/// f16 storage, f32 arithmetic on this target, so the deviation is the weights' rounding alone.
-const F16_BOUNDS: [(&str, f32); 8] = [
-    ("value", 3.2e-3),         // measured 1.56e-3
-    ("bev_query", 0.11),       // 5.14e-2
-    ("gkt_weights", 0.022),    // 1.10e-2
-    ("gathered", 6.5e-3),      // 3.22e-3
-    ("camera_bev", 0.16),      // 7.80e-2
-    ("satellite_bev", 8.3e-3), // 4.13e-3
-    ("class_logits", 0.19),    // 9.50e-2
-    ("points", 0.048),         // 2.39e-2 (normalised to the BEV range)
-];
-
-/// The same for the int8 bundle (int8 weights, one scale per output channel, f32 arithmetic):
-/// measured (2026-12-02) and doubled.
-const INT8_BOUNDS: [(&str, f32); 8] = [
-    ("value", 0.05),         // measured 2.48e-2
-    ("bev_query", 1.05),     // 5.12e-1
-    ("gkt_weights", 0.25),   // 1.25e-1
-    ("gathered", 0.092),     // 4.55e-2
-    ("camera_bev", 1.4),     // 6.92e-1
-    ("satellite_bev", 0.23), // 1.12e-1
-    ("class_logits", 0.93),  // 4.62e-1
-    ("points", 0.18),        // 8.61e-2 (normalised to the BEV range)
-];
-
-/// `precision`'s bundle: its manifest says so, its file is at most `max_size_share` of the f32
-/// one, it loads and steps through `SatMap`, and every stage buffer stays within `bounds` of the
-/// f32 bundle's (and moves: the rounding is real).
-fn steps_within_bounds_of_f32(precision: Precision, bounds: &[(&str, f32)], max_size_share: f64) {
-    let low = open_compiled(compiled_as(precision)).unwrap();
-    assert_eq!(low.manifest().precision, precision);
-    let f32_bundle = open_compiled(compiled()).unwrap();
-    assert_eq!(f32_bundle.manifest().precision, Precision::F32);
-    let (small, big) = (compiled_as(precision).len(), compiled().len());
-    println!("{precision} bundle {small} bytes, f32 {big} bytes");
-    assert!(
-        (small as f64) < big as f64 * max_size_share,
-        "{small} vs {big}"
-    );
-    let from_f32 = stage_buffers(&f32_bundle);
-    let from_low = stage_buffers(&low);
-    let mut moved = false;
-    for ((name, got, _), (_, full, _)) in from_low.iter().zip(&from_f32) {
-        let d = max_abs_diff(got, full);
-        moved |= d > 0.0;
-        let stage = name.split(' ').nth(2).unwrap();
-        let bound = bounds
-            .iter()
-            .find(|(n, _)| *n == stage)
-            .map(|(_, b)| *b)
-            .unwrap();
-        println!("{precision} {name}: max abs diff from f32 {d:e} (bound {bound:e})");
-        assert!(d <= bound, "{precision} {name}: {d:e} > {bound:e}");
-    }
-    assert!(
-        moved,
-        "the {precision} bundle computes exactly what f32 does: its weights were not rounded"
-    );
-}
-
-/// The f16 bundle, within [`F16_BOUNDS`], in under 60% of the f32 file.
-#[test]
-fn the_f16_bundle_steps_within_its_bounds_of_f32() {
-    steps_within_bounds_of_f32(Precision::F16, &F16_BOUNDS, 0.6);
-}
-
-/// The int8 bundle, within [`INT8_BOUNDS`], in under 45% of the f32 file.
-#[test]
-fn the_int8_bundle_steps_within_its_bounds_of_f32() {
-    steps_within_bounds_of_f32(Precision::Int8, &INT8_BOUNDS, 0.45);
-}
-
 /// A folder of already-quantised ONNX stages (manifest `precision = "int8"`) is refused by
 /// name, at any precision asked: tract 0.23.9 cannot write its quantise operators as NNEF
 /// (`docs/int8.md`), and int8 is made from the f32 folder instead.
@@ -528,10 +449,6 @@ fn maps_stay_close_to_f32(precision: Precision, bounds: &MapBounds) {
     use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay};
     use satmap_sim::route_pack_builder::TileCompression;
 
-    let dir = std::env::temp_dir().join(format!("satmap-{precision}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let low_path = dir.join(format!("test-{precision}.satmap"));
-    std::fs::write(&low_path, compiled_as(precision)).unwrap();
     let run = |bundle: std::path::PathBuf| {
         let cfg = ReplayConfig {
             bundle_dir: bundle,
@@ -550,8 +467,7 @@ fn maps_stay_close_to_f32(precision: Precision, bounds: &MapBounds) {
         replay(&cfg, None).unwrap()
     };
     let full = run(committed());
-    let low = run(low_path);
-    std::fs::remove_dir_all(&dir).ok();
+    let low = run(compiled_path(precision));
     let same = deviation(&full.maps, &full.maps);
     assert_eq!(
         (same.kept, same.elements, same.mean_chamfer_m),

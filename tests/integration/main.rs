@@ -8,7 +8,6 @@ mod bundle_integrity;
 mod c_api;
 mod common;
 mod compiled_bundle;
-mod golden_lut_kernel;
 mod golden_step;
 mod layout_variants;
 mod route_frame_distortion;

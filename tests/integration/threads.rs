@@ -1,98 +1,16 @@
-//! The graph engine on a private pool of 2 threads computes exactly what it computes on the
-//! calling thread alone: every stage's outputs bit for bit on the bundle's reference inputs, and
-//! every step digest of a replay. The pool really exists (its workers are named threads of this
-//! process). Speed is the `stages` bench's and `make bench-peers`' business, not a test's.
+//! The harness's replay on a private pool of 2 threads has every step digest of the replay on
+//! one thread. The stage-by-stage check, bit for bit, is the ECU tests' (`tests/ecu/tests/
+//! threads.rs`, run on every target). Speed is the benches' business, not a test's.
 
 use crate::common;
 
 use std::num::NonZeroUsize;
 
-use satmap_runtime::Engine;
 use satmap_runtime::capacity::layout;
-use satmap_runtime::engine_tract::TractEngine;
-use satmap_sim::cli::bench_stages::ReferenceInputs;
 use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay};
 use satmap_sim::route_pack_builder::TileCompression;
 
 const TWO: NonZeroUsize = NonZeroUsize::new(2).unwrap();
-
-/// Every stage's outputs on `reference.safetensors`' inputs, as raw bits, in stage order.
-fn stage_outputs(engine: &mut TractEngine) -> Vec<Vec<u32>> {
-    let d = engine.dims().clone();
-    let r = ReferenceInputs::load(&common::bundle_dir(), &d).unwrap();
-    let mut value = vec![0.0; d.value_len()];
-    let mut query = vec![0.0; d.bev_len()];
-    let mut weights = vec![0.0; d.weights_len()];
-    let mut camera_bev = vec![0.0; d.bev_len()];
-    let mut satellite_bev = vec![0.0; d.bev_len()];
-    let mut logits = vec![0.0; d.logits_len()];
-    let mut points = vec![0.0; d.points_len()];
-    engine.encode_image(0, &r.image, &mut value).unwrap();
-    engine
-        .bev_query(&r.can_bus, &mut query, &mut weights)
-        .unwrap();
-    engine
-        .bev_encode(&r.query, &r.gathered, &mut camera_bev)
-        .unwrap();
-    engine
-        .encode_satellite(&r.crop, &mut satellite_bev)
-        .unwrap();
-    engine
-        .decode_map(&r.camera_bev, &r.satellite_bev, &mut logits, &mut points)
-        .unwrap();
-    [
-        value,
-        query,
-        weights,
-        camera_bev,
-        satellite_bev,
-        logits,
-        points,
-    ]
-    .iter()
-    .map(|v| v.iter().map(|x| x.to_bits()).collect())
-    .collect()
-}
-
-fn engine_threads() -> Vec<String> {
-    std::fs::read_dir("/proc/self/task")
-        .unwrap()
-        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("comm")).ok())
-        .map(|s| s.trim().to_owned())
-        .filter(|s| s.starts_with("satmap-engine-"))
-        .collect()
-}
-
-#[test]
-fn every_stage_is_bit_identical_on_one_and_two_threads() {
-    let mut engine = common::compiled_engine();
-    assert_eq!(engine.threads(), NonZeroUsize::MIN);
-    let one = stage_outputs(&mut engine);
-    engine.set_threads(TWO).unwrap();
-    assert_eq!(engine.threads(), TWO);
-    let two = stage_outputs(&mut engine);
-    // rayon starts its workers asynchronously: give them up to 10 s to show up (no timing is
-    // asserted, only that the pool exists).
-    let mut names = engine_threads();
-    for _ in 0..100 {
-        if names.len() == 2 {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(100));
-        names = engine_threads();
-    }
-    names.sort();
-    assert_eq!(names, ["satmap-engine-0", "satmap-engine-1"]);
-    let again = stage_outputs(&mut engine);
-    for (i, ((a, b), c)) in one.iter().zip(&two).zip(&again).enumerate() {
-        assert!(a.iter().any(|&x| x != 0), "output {i} is all zeros");
-        assert!(a == b, "output {i} differs between 1 and 2 threads");
-        assert!(b == c, "output {i} differs between two runs on 2 threads");
-    }
-    // Back to one thread: the pool is dropped with the executor, the outputs stay.
-    engine.set_threads(NonZeroUsize::MIN).unwrap();
-    assert_eq!(stage_outputs(&mut engine), one);
-}
 
 #[test]
 fn a_replay_has_the_same_step_digests_on_one_and_two_threads() {

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -51,29 +52,20 @@ CROSS_FAMILY_ATOL = 5e-5
 CROSS_FAMILY_RTOL = 1e-5
 
 
-def kernel_family(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
-    """`<vendor>-<tier>`: vendor `intel`, `amd` or `other` (`TRACT_X86_KIND` overrides it),
-    tier `avx512f`, `fma` (AVX2 and FMA) or `generic`; the same families as the runtime's
-    `engine_tract::kernel_family`, read off `/proc/cpuinfo`."""
+def kernel_family() -> str:
+    """The CPU's kernel family (`intel-avx512f`, `amd-fma`, `aarch64-neon`, ...), asked of the
+    runtime itself (`satmap-sim kernel-family`, the one rule in
+    `runtime/src/engine_tract/kernel_family.rs`): onnxruntime's x86 kernels follow the same
+    vendor and tier split as tract's. The binary is `$SATMAP_SIM`, or the one `make test` builds
+    (`target/debug/satmap-sim`)."""
+    sim = os.environ.get("SATMAP_SIM") or str(MODELS_ROOT.parent / "target" / "debug" / "satmap-sim")
     try:
-        lines = cpuinfo.read_text().splitlines()
-    except OSError:
-        lines = []
-    flags = set(next((ln for ln in lines if ln.startswith("flags")), "").split())
-    vendor_id = next((ln.split(":", 1)[1].strip() for ln in lines
-                      if ln.startswith("vendor_id")), "")
-    kind = os.environ.get("TRACT_X86_KIND")
-    if kind is not None:
-        vendor = kind if kind in ("intel", "amd") else "other"
-    else:
-        vendor = {"GenuineIntel": "intel", "AuthenticAMD": "amd"}.get(vendor_id, "other")
-    if "avx512f" in flags:
-        tier = "avx512f"
-    elif {"avx2", "fma"} <= flags:
-        tier = "fma"
-    else:
-        tier = "generic"
-    return f"{vendor}-{tier}"
+        out = subprocess.run([sim, "kernel-family"], check=True, capture_output=True, text=True,
+                             timeout=60)
+    except (OSError, subprocess.SubprocessError) as e:
+        raise RuntimeError(f"cannot ask {sim} for the kernel family (build it with `cargo test "
+                           f"--workspace --no-run`, or set SATMAP_SIM): {e}") from e
+    return out.stdout.strip()
 
 
 def stale_tensors(committed: dict[str, np.ndarray], fresh: dict[str, np.ndarray]) -> list[str]:

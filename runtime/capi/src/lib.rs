@@ -19,8 +19,8 @@ pub use ffi_types::{
     SatmapSlice, SatmapSliceInfo,
 };
 pub use runtime::{
-    SatmapRuntime, satmap_check_map_frame, satmap_create, satmap_destroy, satmap_last_error,
-    satmap_map_frame, satmap_recalibrate, satmap_region_info, satmap_step, satmap_step_abort,
-    satmap_step_begin, satmap_step_finish, satmap_step_run_next,
+    SatmapRuntime, satmap_check_map_frame, satmap_create, satmap_destroy, satmap_kernel_family,
+    satmap_last_error, satmap_map_frame, satmap_recalibrate, satmap_region_info, satmap_step,
+    satmap_step_abort, satmap_step_begin, satmap_step_finish, satmap_step_run_next,
 };
 pub use status::SatmapStatus;

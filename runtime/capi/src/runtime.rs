@@ -490,3 +490,15 @@ pub unsafe extern "C" fn satmap_last_error(
     }))
     .unwrap_or(0)
 }
+
+/// The family of graph kernels this CPU runs (`intel-avx512f`, `amd-fma`, `aarch64-neon`, ...),
+/// as a static NUL-terminated string. Map digests are bit-identical within a family, not across
+/// families, so digests recorded on one ECU are compared with runs of the same family
+/// (`examples/c/expected-<family>.txt`). Never NULL; the string lives as long as the program.
+#[unsafe(no_mangle)]
+pub extern "C" fn satmap_kernel_family() -> *const c_char {
+    catch_unwind(satmap_runtime::engine_tract::KernelFamily::detect)
+        .unwrap_or(satmap_runtime::engine_tract::KernelFamily::Generic)
+        .c_name()
+        .as_ptr()
+}

@@ -32,6 +32,7 @@ pub mod epilogue;
 pub mod fold;
 pub mod gelu;
 pub mod gemm;
+pub mod kernel_family;
 pub mod layer_norm;
 pub mod linear;
 pub mod max_pool;
@@ -51,70 +52,8 @@ use crate::bundle::{Bundle, BundleError, DType, GraphFormat, Precision, StageEnt
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
+pub use kernel_family::{KernelFamily, kernel_family};
 pub use rewrite::Rewrites;
-
-/// The family of f32 kernels tract 0.23.9 picks on this CPU, `<vendor>-<tier>`: vendor `intel`,
-/// `amd` or `other` (tract keeps one matmul cost model per vendor, so the same instruction set
-/// gets other tiles on another vendor), tier `avx512f`, `fma` (AVX2 and FMA) or `generic`
-/// (`generic` alone off x86-64). `TRACT_X86_KIND=intel|amd|other` overrides the vendor, as it does
-/// in tract. Outputs are bit-identical run to run and across thread counts within a family, not
-/// across families: the tiling changes the summation order (measured: the demo drive's run
-/// digest differs between an AVX-512 Xeon, an AVX-512 EPYC and an AVX2 EPYC, values within
-/// 2e-5). Digests committed from a run are therefore kept per family. The same rule is read off
-/// `/proc/cpuinfo` by the Makefile (the C example's digests) and by
-/// `satmap_ref.golden.kernel_family` (the Python goldens).
-#[must_use]
-pub fn kernel_family() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let vendor = match std::env::var("TRACT_X86_KIND").ok().as_deref() {
-            Some("intel") => "intel",
-            Some("amd") => "amd",
-            Some(_) => "other",
-            None => cpuid_vendor(),
-        };
-        let tier = if std::is_x86_feature_detected!("avx512f") {
-            "avx512f"
-        } else if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-            "fma"
-        } else {
-            "generic"
-        };
-        match (vendor, tier) {
-            ("intel", "avx512f") => "intel-avx512f",
-            ("intel", "fma") => "intel-fma",
-            ("intel", _) => "intel-generic",
-            ("amd", "avx512f") => "amd-avx512f",
-            ("amd", "fma") => "amd-fma",
-            ("amd", _) => "amd-generic",
-            (_, "avx512f") => "other-avx512f",
-            (_, "fma") => "other-fma",
-            _ => "other-generic",
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        "generic"
-    }
-}
-
-/// The CPU vendor as CPUID leaf 0 spells it, in [`kernel_family`]'s words.
-#[cfg(target_arch = "x86_64")]
-fn cpuid_vendor() -> &'static str {
-    // SAFETY-free on x86-64: CPUID leaf 0 exists on every x86-64 CPU (`unsafe` only on older
-    // toolchains, hence the allow).
-    #[allow(unused_unsafe)]
-    let id = unsafe { std::arch::x86_64::__cpuid(0) };
-    let mut s = [0u8; 12];
-    s[0..4].copy_from_slice(&id.ebx.to_le_bytes());
-    s[4..8].copy_from_slice(&id.edx.to_le_bytes());
-    s[8..12].copy_from_slice(&id.ecx.to_le_bytes());
-    match &s {
-        b"GenuineIntel" => "intel",
-        b"AuthenticAMD" => "amd",
-        _ => "other",
-    }
-}
 
 /// One loaded stage: its plan's reused state and its input tensors.
 struct StageRunner {

@@ -5,15 +5,13 @@
 //! gather-sum must be bit-identical (same operations in the same order as
 //! `satmap_ref.gkt.gather_sum`).
 
-use crate::common;
-
-use crate::common::{Golden, GoldenFrame, calibration};
-use satmap_runtime::bundle::Bundle;
+use satmap_ecu_tests::golden::{Golden, GoldenFrame, calibration, compiled_path};
+use satmap_runtime::bundle::{Bundle, Precision};
 use satmap_runtime::gkt::kernel::gather_sum;
 use satmap_runtime::gkt::lut::Lut;
 
 fn lut() -> Lut {
-    let bundle = Bundle::open(common::bundle_dir()).unwrap();
+    let bundle = Bundle::open(compiled_path(Precision::F32)).unwrap();
     Lut::new(bundle.dims(), &calibration()).unwrap()
 }
 

@@ -1,0 +1,87 @@
+//! The committed f16 and int8 compiled bundles (`models/bundles/test-f16.satmap`,
+//! `test-int8.satmap`, kept current by `tests/integration/compiled_bundle.rs`) step within their
+//! measured bounds of the committed f32 bundle, stage by stage over both golden frames, and in
+//! a fraction of its file size.
+//!
+//! Both are weight storage, f32 arithmetic: the f16 weights are widened at load on every target
+//! (tract's f16 kernels are not used for them), the int8 weights are dequantised per output
+//! channel. The deviation is the weights' rounding alone, so the bounds hold on every kernel
+//! family.
+
+use satmap_ecu_tests::golden::{compiled_engine_as, compiled_path, max_abs_diff};
+use satmap_ecu_tests::parity::stage_buffers;
+use satmap_runtime::bundle::{Bundle, Precision};
+
+/// Largest deviation of the f16 bundle from the f32 one per stage buffer, over both golden
+/// frames of the trained `test` weights: measured (2026-12-01) and doubled.
+const F16_BOUNDS: [(&str, f32); 8] = [
+    ("value", 3.2e-3),         // measured 1.56e-3
+    ("bev_query", 0.11),       // 5.14e-2
+    ("gkt_weights", 0.022),    // 1.10e-2
+    ("gathered", 6.5e-3),      // 3.22e-3
+    ("camera_bev", 0.16),      // 7.80e-2
+    ("satellite_bev", 8.3e-3), // 4.13e-3
+    ("class_logits", 0.19),    // 9.50e-2
+    ("points", 0.048),         // 2.39e-2 (normalised to the BEV range)
+];
+
+/// The same for the int8 bundle (int8 weights, one scale per output channel, f32 arithmetic):
+/// measured (2026-12-02) and doubled.
+const INT8_BOUNDS: [(&str, f32); 8] = [
+    ("value", 0.05),         // measured 2.48e-2
+    ("bev_query", 1.05),     // 5.12e-1
+    ("gkt_weights", 0.25),   // 1.25e-1
+    ("gathered", 0.092),     // 4.55e-2
+    ("camera_bev", 1.4),     // 6.92e-1
+    ("satellite_bev", 0.23), // 1.12e-1
+    ("class_logits", 0.93),  // 4.62e-1
+    ("points", 0.18),        // 8.61e-2 (normalised to the BEV range)
+];
+
+/// `precision`'s bundle: its manifest says so, its file is at most `max_size_share` of the f32
+/// one, and every stage buffer stays within `bounds` of the f32 bundle's (and moves: the
+/// rounding is real).
+fn steps_within_bounds_of_f32(precision: Precision, bounds: &[(&str, f32)], max_size_share: f64) {
+    let low = Bundle::open(compiled_path(precision)).unwrap();
+    assert_eq!(low.manifest().precision, precision);
+    let full = Bundle::open(compiled_path(Precision::F32)).unwrap();
+    assert_eq!(full.manifest().precision, Precision::F32);
+    let size = |p: Precision| std::fs::metadata(compiled_path(p)).unwrap().len();
+    let (small, big) = (size(precision), size(Precision::F32));
+    println!("{precision} bundle {small} bytes, f32 {big} bytes");
+    assert!(
+        (small as f64) < big as f64 * max_size_share,
+        "{small} vs {big}"
+    );
+    let from_f32 = stage_buffers(|| compiled_engine_as(Precision::F32));
+    let from_low = stage_buffers(|| compiled_engine_as(precision));
+    let mut moved = false;
+    for ((name, got, _), (_, f32s, _)) in from_low.iter().zip(&from_f32) {
+        let d = max_abs_diff(got, f32s);
+        moved |= d > 0.0;
+        let stage = name.split(' ').nth(2).unwrap();
+        let bound = bounds
+            .iter()
+            .find(|(n, _)| *n == stage)
+            .map(|(_, b)| *b)
+            .unwrap();
+        println!("{precision} {name}: max abs diff from f32 {d:e} (bound {bound:e})");
+        assert!(d <= bound, "{precision} {name}: {d:e} > {bound:e}");
+    }
+    assert!(
+        moved,
+        "the {precision} bundle computes exactly what f32 does: its weights were not rounded"
+    );
+}
+
+/// The f16 bundle, within [`F16_BOUNDS`], in under 60% of the f32 file.
+#[test]
+fn the_f16_bundle_steps_within_its_bounds_of_f32() {
+    steps_within_bounds_of_f32(Precision::F16, &F16_BOUNDS, 0.6);
+}
+
+/// The int8 bundle, within [`INT8_BOUNDS`], in under 45% of the f32 file.
+#[test]
+fn the_int8_bundle_steps_within_its_bounds_of_f32() {
+    steps_within_bounds_of_f32(Precision::Int8, &INT8_BOUNDS, 0.45);
+}
