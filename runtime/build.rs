@@ -18,7 +18,26 @@ fn fail(message: &str) -> ! {
     std::process::exit(0);
 }
 
+/// Whether the tests of the native products run here: they need AVX-512F (the products' only
+/// tier) on the machine that builds and runs them, the host, so a build for the host on a CPU
+/// with AVX-512F sets `satmap_avx512_tests`; elsewhere (an AVX2 machine, a cross build) those
+/// tests are reported as ignored with the reason, never a silent `ok`.
+/// `gemm::tests::the_native_tier_tests_run_where_this_cpu_has_the_tier` fails if the cfg and the
+/// CPU disagree (a target folder built on another machine).
+fn native_tier_tests() {
+    println!("cargo::rustc-check-cfg=cfg(satmap_avx512_tests)");
+    let host = std::env::var("HOST").unwrap_or_default();
+    let target = std::env::var("TARGET").unwrap_or_default();
+    #[cfg(target_arch = "x86_64")]
+    if host == target && std::is_x86_feature_detected!("avx512f") {
+        println!("cargo::rustc-cfg=satmap_avx512_tests");
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (host, target);
+}
+
 fn main() {
+    native_tier_tests();
     println!("cargo::rerun-if-env-changed=SATMAP_LAYOUT");
     let manifest_dir = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     // The workspace root: the directory of the default memory_layout.toml.

@@ -44,18 +44,18 @@ source "$HERE/cross.env"
 ENV+=("${CROSS_ENV[@]}")
 
 exec unshare --mount --propagation private bash -euo pipefail -c '
-  root=$1 repo=$2 mount_repo=$3 registry=$4 workdir=$5; shift 5
+  root=$1 repo=$2 mount_repo=$3 registry=$4 workdir=$5 n_env=$6; shift 6
+  env_vars=("${@:1:n_env}"); shift "$n_env"
   mount -t proc proc "$root/proc"
   mount --rbind /sys "$root/sys"
   mount --rbind /dev "$root/dev"
   mkdir -p "$root/root/.cargo/registry"
   mount --bind "$registry" "$root/root/.cargo/registry"
+  cd_to=/
   if [[ $mount_repo == 1 ]]; then
     mkdir -p "$root$repo"
     mount --bind "$repo" "$root$repo"
     cd_to=$workdir
-  else
-    cd_to=/
   fi
-  exec chroot "$root" /usr/bin/env -i "$@" bash -c "cd \"\$0\" && exec \"\$@\"" "$cd_to"
-' _ "$ROOT" "$REPO" "$MOUNT_REPO" "$HOST_REGISTRY" "$WORKDIR" "${ENV[@]}" "$@"
+  exec chroot "$root" /usr/bin/env -i "${env_vars[@]}" bash -c "cd \"\$0\" && exec \"\$@\"" "$cd_to" "$@"
+' _ "$ROOT" "$REPO" "$MOUNT_REPO" "$HOST_REGISTRY" "$WORKDIR" "${#ENV[@]}" "${ENV[@]}" "$@"

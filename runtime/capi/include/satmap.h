@@ -267,6 +267,12 @@ enum SatmapStatus satmap_recalibrate(struct SatmapRuntime *rt, const char *calib
 // `rt` from `satmap_create`; `buf` NULL or valid for `cap` bytes.
 size_t satmap_last_error(const struct SatmapRuntime *rt, char *buf, size_t cap);
 
+// The family of graph kernels this CPU runs (`intel-avx512f`, `amd-fma`, `aarch64-neon`, ...),
+// as a static NUL-terminated string. Map digests are bit-identical within a family, not across
+// families, so digests recorded on one ECU are compared with runs of the same family
+// (`examples/c/expected-<family>.txt`). Never NULL; the string lives as long as the program.
+const char *satmap_kernel_family(void);
+
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

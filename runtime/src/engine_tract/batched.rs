@@ -376,11 +376,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn attention_products_run_natively_with_tracts_bits() {
-        if !gemm::available() {
-            eprintln!("no AVX-512 here: the pass does not run on this CPU");
-            return;
-        }
         for (expr, sx, sy) in [
             // Decoder self-attention scores and weighted values (4 heads).
             ("mak,nak->amn", vec![200, 4, 64], vec![150, 4, 64]),
@@ -403,10 +403,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn batches_on_the_pool_keep_the_bits() {
-        if !gemm::available() {
-            return;
-        }
         // 32 windows of 49 tokens: each product too small to split, the batches split.
         let (model, inputs) = product_model("abmk,abkn->ambn", &[8, 4, 49, 49], &[8, 4, 49, 32]);
         let want = run_optimized(model.clone(), &inputs);

@@ -228,6 +228,11 @@ mod tests {
                 assert_eq!(taken, 1, "{expr}");
                 let native = run_optimized(linear, &inputs);
                 assert_eq!(bits(&native[0]), bits(&want[0]), "{expr} native");
+            } else {
+                assert_eq!(
+                    taken, 0,
+                    "{expr}: no native tier here, the product stays tract's"
+                );
             }
         }
     }

@@ -405,11 +405,11 @@ mod tests {
     use tract_nnef::tract_core::tract_data::knobs::KnobScope;
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn resnet_shapes_run_unfolded_with_tracts_bits() {
-        if !gemm::available() {
-            eprintln!("no AVX-512 here: the pass does not run on this CPU");
-            return;
-        }
         let cases = [
             // `nano`'s layer1 (64 -> 64 over 48 x 80), a layer2 entry (stride 2), the stem
             // (7x7, stride 2, padding 3), a dilated one, odd maps that leave border pixels,
@@ -464,10 +464,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn direct_spatial_stems_run_unfolded_with_tracts_im2col_bits() {
-        if !gemm::available() {
-            return;
-        }
         // `test`'s 8-channel stem and a 16-channel one, both run direct spatial by tract.
         for s in [
             ConvShape::new(3, 8, [180, 320], 7, 2, 3),

@@ -317,11 +317,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn resnet_blocks_take_their_shortcut_and_relu_with_tracts_bits() {
-        if !gemm::available() {
-            eprintln!("no AVX-512 here: the native convolutions do not run on this CPU");
-            return;
-        }
         for s in [
             ConvShape::new(32, 64, [24, 40], 3, 1, 1),
             ConvShape::new(64, 128, [12, 20], 1, 1, 0),
@@ -332,10 +332,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn linear_layers_take_their_residual_and_relu_with_tracts_bits() {
-        if !gemm::available() {
-            return;
-        }
         // The BEV encoder's feed-forward layers (3200 tokens), a few tokens, no bias.
         for (lead, k, n, bias) in [(vec![3200], 256, 512, true), (vec![2, 9], 40, 33, false)] {
             let model = linear_model(&lead, k, n, false, bias);

@@ -353,11 +353,11 @@ mod tests {
     };
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn pointwise_convolutions_run_natively_with_tracts_bits() {
-        if !gemm::available() {
-            eprintln!("no AVX-512 here: the pass does not run on this CPU");
-            return;
-        }
         for s in [
             // ResNet-50's bottleneck projections (`paper`'s layer1, smaller maps), an FPN
             // lateral without the batch axis, odd sizes off the tiles.
@@ -381,10 +381,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn strided_projections_gather_the_map_they_were_downsampled_from() {
-        if !gemm::available() {
-            return;
-        }
         // ResNet's shortcut projections (stride 2, odd and even maps), with and without the
         // batch axis.
         for s in [

@@ -104,6 +104,9 @@ pub fn run(t: Tile<'_>) -> bool {
     if !sized || !available() {
         return false;
     }
+    // Read by the AVX-512 kernel only; elsewhere `available()` returned above.
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = accumulate;
     #[cfg(target_arch = "x86_64")]
     // SAFETY: AVX-512F is present (checked above) and every pointer the kernel forms stays
     // inside the slices (checked above): `kc` steps of MR values of `a` and NR of `b`, rows

@@ -647,10 +647,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn finishes_add_the_residual_and_floor_after_the_bias_bit_for_bit() {
-        if !available() {
-            return;
-        }
         // Every split: rows (few columns, deep), whole B (`rows_outer`), columns (filled B),
         // and edges in m and n.
         for (m, n, k) in [(25, 70, 257), (100, 70, 600), (30, 2100, 520), (13, 33, 7)] {
@@ -693,6 +694,24 @@ mod tests {
         assert!(!product_then(&ops, &mut [0.0; 12], short));
     }
 
+    /// The native-tier tests above are ignored without AVX-512F; this fails when they are
+    /// ignored on a CPU that has it (or compiled in on one that lacks it), so a machine with the
+    /// tier never reports them skipped.
+    #[test]
+    fn the_native_tier_tests_run_where_this_cpu_has_the_tier() {
+        assert_eq!(
+            cfg!(satmap_avx512_tests),
+            available(),
+            "the native-tier tests are built for a CPU {} AVX-512F, this one {} it: rebuild here",
+            if cfg!(satmap_avx512_tests) {
+                "with"
+            } else {
+                "without"
+            },
+            if available() { "has" } else { "lacks" },
+        );
+    }
+
     #[test]
     fn the_floor_is_rusts_f32_max_on_this_target() {
         // tract's by-scalar Max is `v.max(s)` compiled for x86; `black_box` keeps LLVM from
@@ -717,11 +736,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn products_are_the_fma_chain_bit_for_bit() {
-        if !available() {
-            eprintln!("no AVX-512 here: the native product is not planned on this CPU");
-            return;
-        }
         // Edges in m (13, 25), n (33, 70), k across blocks (257, 600) and a whole multiple.
         for (m, n, k) in [
             (1, 1, 1),
@@ -740,10 +759,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn threads_split_rows_and_columns_without_moving_a_bit() {
-        if !available() {
-            return;
-        }
         let pool = std::sync::Arc::new(
             rayon::ThreadPoolBuilder::new()
                 .num_threads(2)

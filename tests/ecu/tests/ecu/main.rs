@@ -8,4 +8,5 @@ mod dropout;
 mod lut_kernel;
 mod precisions;
 mod reference;
+mod scenario;
 mod threads;
