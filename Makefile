@@ -1,6 +1,7 @@
 # The two front-door commands (see README.md):
 #   make demo   a simulated drive with the default embedded model: latency/memory report + picture
-#   make test   the whole test suite (Rust and Python); .ci/run calls it
+#   make test   the whole test suite (Rust and Python, the host and the ECU targets under
+#               emulation); .ci/run calls it
 # Commands a person runs, never CI: make train (the trained default model), make fuzz (1.35M inputs).
 # Everything they need is installed by the targets themselves.
 
@@ -8,7 +9,8 @@ PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers
+.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers \
+  cross-toolchain test-aarch64 test-baremetal test-targets
 
 # The demo runs the binary `make test` builds (the same cargo command, so the dependency tree is
 # compiled once for both): the test profile, opt-level 3 for ours and tract's engine, the
@@ -18,15 +20,20 @@ demo:
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
 	target/debug/satmap-sim drive --out out/demo
 
-# The Python venv (pip, ~5 GB of wheels: network and disk, not CPU) installs in the background
-# while the Rust steps compile; its log is printed after them, and either failing fails `test`.
+# The Python venv (pip, ~5 GB of wheels: network and disk, not CPU) and the cross toolchain
+# (Debian packages into a chroot, ~3 GB: network and disk) install in the background while the
+# Rust steps compile; their logs are printed after them, and any of them failing fails `test`.
+# Then the Python tests, the paper variant and the ECU targets under emulation (test-targets).
 test:
 	@mkdir -p out
 	@{ $(MAKE) --no-print-directory venv > out/venv.log 2>&1; echo $$? > out/venv.rc; } & \
+	  { $(MAKE) --no-print-directory cross-toolchain > out/cross-toolchain.log 2>&1; \
+	    echo $$? > out/cross-toolchain.rc; } & \
 	  $(MAKE) --no-print-directory lint nostd test-rust test-c; rust=$$?; wait; \
 	  echo "--- make venv (run beside the Rust steps):"; cat out/venv.log; \
-	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0
-	$(MAKE) --no-print-directory test-python test-paper
+	  echo "--- make cross-toolchain (run beside the Rust steps):"; cat out/cross-toolchain.log; \
+	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0 && test "$$(cat out/cross-toolchain.rc)" -eq 0
+	$(MAKE) --no-print-directory test-python test-paper test-targets
 
 lint:
 	$(CARGO) fmt --all -- --check
@@ -130,7 +137,8 @@ test-c:
 	$(CC) -std=c11 -Wall -Wextra -Werror -g -O1 -I runtime/capi/include examples/c/replay.c \
 	  $(CAPI_LIB) -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o $(C_REPLAY)
 	$(C_REPLAY) $(C_REPLAY_ARGS)
-	command -v valgrind >/dev/null || { apt-get update -qq && apt-get install -y -qq valgrind; }
+	command -v valgrind >/dev/null || flock /tmp/satmap-apt.lock \
+	  sh -c 'apt-get update -qq && apt-get install -y -qq valgrind'  # the lock: targets/toolchain.sh
 	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite,indirect \
 	  --suppressions=examples/c/valgrind.supp --quiet $(C_REPLAY) $(C_REPLAY_ARGS) memcheck
 
@@ -154,3 +162,27 @@ train: venv
 	cp $(RUNS)/sat/weights.safetensors models/weights/test_sat.safetensors
 	cp $(RUNS)/camera/weights.safetensors models/weights/test_camera.safetensors
 	$(PY) -m satmap_ref.golden --take-input $(DATA)
+
+# The ECU's processors, under emulation (README "Targets"; targets/README.md). The toolchain comes
+# from Debian's packages only: a trixie chroot with Rust 1.96, aarch64's std, the std sources
+# for -Z build-std, the aarch64 GCC and qemu, cached outside the repository
+# (/var/cache/satmap-cross; idempotent, ~4 min the first time).
+cross-toolchain:
+	bash targets/toolchain.sh
+
+# aarch64-unknown-linux-gnu, the application core (Cortex-A76 under qemu-aarch64): the ECU tests
+# and the C API's, then the C example cross-compiled and replayed. The determinism test takes
+# AARCH64_DETERMINISM_STEPS steps in each of two processes (200 on the host; a slice here, ~4 s a
+# step under emulation; `make test-aarch64 AARCH64_DETERMINISM_STEPS=200` runs the full count).
+AARCH64_DETERMINISM_STEPS ?= 24
+test-aarch64: cross-toolchain
+	SATMAP_DETERMINISM_STEPS=$(AARCH64_DETERMINISM_STEPS) bash targets/aarch64.sh
+
+# aarch64-unknown-none and thumbv7em-none-eabihf, the safety core: the core check's images under
+# qemu-system, digests equal to the host's, .text and static RAM per image. Needs the host's
+# satmap-baremetal (built by test-rust's cargo command) for the host's line.
+test-baremetal: cross-toolchain
+	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
+	bash targets/baremetal.sh
+
+test-targets: test-aarch64 test-baremetal

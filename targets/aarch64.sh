@@ -22,7 +22,6 @@ echo "--- aarch64: tests under emulation"
 # The same cargo command runs them (cargo's runner is the emulator, targets/cross.env).
 $CROSS cargo test --target $TARGET -p satmap-ecu-tests -p satmap-capi 2>&1 | tee out/aarch64-tests.log
 passed=$(awk '/^test result:/ { for (i = 1; i <= NF; i++) if ($i == "passed;") n += $(i - 1) } END { print n + 0 }' out/aarch64-tests.log)
-family=$(grep -m1 -o 'kernel family: [a-z0-9-]*' out/aarch64-tests.log | cut -d' ' -f3 || true)
 
 echo "--- aarch64: the C example, cross-compiled and replayed"
 mkdir -p target/cross/c
@@ -33,6 +32,7 @@ $CROSS bash -c 'qemu-aarch64 -cpu "$SATMAP_QEMU_CPU" -L /usr/aarch64-linux-gnu t
   models/bundles/test.satmap models/calibration/nuscenes_like.toml examples/c/scenario.bin examples/c' \
   | tee out/aarch64-c-example.log
 cpu=$($CROSS bash -c 'echo "$SATMAP_QEMU_CPU"')
+family=$(grep -m1 -o 'kernel family [a-z0-9-]*' out/aarch64-c-example.log | cut -d' ' -f3 || true)
 if [[ "$passed" -eq 0 ]]; then
   echo "aarch64: no test ran" >&2
   exit 1

@@ -38,8 +38,8 @@ if [[ -f "$STAMP" && "$(cat "$STAMP")" == "$WANT" ]]; then
 fi
 
 if ! command -v debootstrap >/dev/null; then
-  apt-get update -qq
-  apt-get install -y -qq debootstrap >/dev/null
+  # `make test` installs valgrind on the host at the same time: both take this lock.
+  flock /tmp/satmap-apt.lock sh -c 'apt-get update -qq && apt-get install -y -qq debootstrap >/dev/null'
 fi
 
 # The Debian mirror the host already uses (the only one reachable here).
