@@ -19,8 +19,8 @@ HERE=$(cd "$(dirname "$0")" && pwd)
 PACKAGES=(
   # Rust 1.96 by Debian, the aarch64 std (multiarch) and the std sources for -Z build-std.
   rustc-web cargo-web libstd-rust-web-dev libstd-rust-web-dev:arm64 rust-web-src
-  # rust-lld: the linker the *-none targets default to.
-  rust-web-llvm lld
+  # rust-lld (a link to lld-22): the linker the *-none targets default to.
+  rust-web-llvm lld-22
   # Host C toolchain (build scripts link with it) and the aarch64 cross toolchain (tract-linalg's
   # NEON assembly, the final link, the C example).
   gcc libc6-dev gcc-aarch64-linux-gnu libc6-dev-arm64-cross

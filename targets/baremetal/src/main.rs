@@ -16,8 +16,8 @@ use semihosting::println;
 
 /// The golden frame the check reads (the `test` model's frame 0).
 const GOLDEN_LEN: usize = include_bytes!("../../../models/golden/test/frame_000.safetensors").len();
-/// Placed where the board has room: PSRAM on the Cortex-M4F (its 4 MiB code SSRAM holds the
-/// program), read-only data on `virt`.
+/// Placed where the board has room: PSRAM on the Cortex-M4F (`link/mps2_an386.x`), read-only
+/// data on `virt`.
 #[cfg_attr(
     all(target_os = "none", target_arch = "arm"),
     unsafe(link_section = ".golden")
@@ -45,7 +45,14 @@ fn check() -> i32 {
             i32::from(equal != total)
         }
         Err(fault) => {
-            println!("core check failed: {fault:?}");
+            // The golden's first bytes (its header length, little-endian) tell a load problem
+            // from a parse problem.
+            println!(
+                "core check failed: {fault:?} (golden at {:p}, {} bytes, starting {:02x?})",
+                GOLDEN.as_ptr(),
+                GOLDEN.len(),
+                &GOLDEN[..16]
+            );
             2
         }
     }
@@ -97,12 +104,37 @@ mod board {
 }
 
 #[cfg(all(target_os = "none", target_arch = "aarch64"))]
+use aarch64_rt::initial_pagetable;
+
+/// `virt`'s RAM (the second GiB of the address space) as one level-1 block of normal,
+/// write-back cacheable, inner-shareable memory (`aarch64_rt::DEFAULT_MAIR` index 1), identity
+/// mapped; nothing else is mapped (semihosting needs no device).
+#[cfg(all(target_os = "none", target_arch = "aarch64"))]
+const RAM_BLOCK: usize = 0x4000_0000 // output address: 1 GiB
+    | 1 << 10 // access flag
+    | 0b11 << 8 // inner shareable
+    | 1 << 2 // attribute index 1: normal memory, write-back
+    | 1; // valid block descriptor
+
+#[cfg(all(target_os = "none", target_arch = "aarch64"))]
+initial_pagetable!({
+    let mut idmap = [0; 512];
+    idmap[1] = RAM_BLOCK;
+    aarch64_rt::InitialPagetable(idmap)
+});
+
+#[cfg(all(target_os = "none", target_arch = "aarch64"))]
 aarch64_rt::entry!(aarch64_main, 64);
 
 #[cfg(all(target_os = "none", target_arch = "aarch64"))]
 fn aarch64_main(_x0: u64, _x1: u64, _x2: u64, _x3: u64) -> ! {
     board::run()
 }
+
+// The single-core critical section embedded-alloc takes comes from `cortex-m` (its
+// `critical-section-single-core` feature): link the crate although no item of it is named.
+#[cfg(all(target_os = "none", target_arch = "arm"))]
+use cortex_m as _;
 
 #[cfg(all(target_os = "none", target_arch = "arm"))]
 #[cortex_m_rt::entry]
