@@ -23,7 +23,8 @@ demo:
 # The Python venv (pip, ~5 GB of wheels: network and disk, not CPU) and the cross toolchain
 # (Debian packages into a chroot, ~3 GB: network and disk) install in the background while the
 # Rust steps compile; their logs are printed after them, and any of them failing fails `test`.
-# Then the Python tests, the paper variant and the ECU targets under emulation (test-targets).
+# Then the ECU targets under emulation (test-targets), the paper variant and the Python tests
+# (pytest last: its closing line is the run's).
 test:
 	@mkdir -p out
 	@{ $(MAKE) --no-print-directory venv > out/venv.log 2>&1; echo $$? > out/venv.rc; } & \
@@ -33,7 +34,7 @@ test:
 	  echo "--- make venv (run beside the Rust steps):"; cat out/venv.log; \
 	  echo "--- make cross-toolchain (run beside the Rust steps):"; cat out/cross-toolchain.log; \
 	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0 && test "$$(cat out/cross-toolchain.rc)" -eq 0
-	$(MAKE) --no-print-directory test-python test-paper test-targets
+	$(MAKE) --no-print-directory test-targets test-paper test-python
 
 lint:
 	$(CARGO) fmt --all -- --check

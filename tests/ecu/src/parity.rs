@@ -17,6 +17,43 @@ pub const SCORE_TOL: f32 = 1e-5;
 /// The CAN-bus vector against the reference.
 pub const CAN_BUS_TOL: f32 = 1e-6;
 
+/// `map`'s stage buffers in [`STAGE_BUFFERS`]' order.
+fn buffers<S: SatelliteSource>(map: &SatMap<TractEngine, S>) -> [&[f32]; 8] {
+    [
+        map.value(),
+        map.query(),
+        map.weights(),
+        map.gathered(),
+        map.camera_bev(),
+        map.satellite_bev(),
+        map.logits(),
+        map.points(),
+    ]
+}
+
+/// A fresh runtime over `engine` with `f`'s satellite crop, after stepping `f` once with every
+/// camera; returns it with the published map.
+///
+/// # Panics
+/// When the runtime cannot be built or the step fails.
+fn stepped(
+    engine: TractEngine,
+    f: &GoldenFrame,
+) -> (
+    SatMap<TractEngine, satmap_runtime::satellite::FixedCrop<'_>>,
+    MapFrame,
+) {
+    let mut map = SatMap::new(
+        engine,
+        &crate::golden::calibration(),
+        satmap_runtime::satellite::FixedCrop(&f.satellite),
+    )
+    .unwrap();
+    let (w, h) = (map.dims().image_w as u32, map.dims().image_h as u32);
+    let out = map.step(&f.frame(1, w, h)).unwrap().clone();
+    (map, out)
+}
+
 /// Every stage buffer of `map` after stepping `f` against the golden's, within [`STAGE_TOL`];
 /// returns the largest difference per stage (for the log).
 ///
@@ -36,16 +73,7 @@ pub fn check_stages<S: SatelliteSource>(
     let mut out = Vec::new();
     // The gather-sum is fed tract's weights and values here, so it inherits their 1e-4;
     // bit-exactness on identical inputs is shown by the LUT kernel tests.
-    for (name, got) in STAGE_BUFFERS.into_iter().zip([
-        map.value(),
-        map.query(),
-        map.weights(),
-        map.gathered(),
-        map.camera_bev(),
-        map.satellite_bev(),
-        map.logits(),
-        map.points(),
-    ]) {
+    for (name, got) in STAGE_BUFFERS.into_iter().zip(buffers(map)) {
         let d = max_abs_diff(got, &g.f32s(name));
         assert!(
             d <= STAGE_TOL,
@@ -102,17 +130,9 @@ pub fn check_decoded(map: &MapFrame, f: &GoldenFrame, prefix: &str) {
 /// When anything differs beyond its tolerance.
 pub fn golden_frames_match(engine: impl Fn() -> TractEngine, what: &str) {
     use satmap_runtime::SatellitePrior;
-    use satmap_runtime::satellite::FixedCrop;
     for index in 0..2 {
         let f = GoldenFrame::load(index);
-        let mut map = SatMap::new(
-            engine(),
-            &crate::golden::calibration(),
-            FixedCrop(&f.satellite),
-        )
-        .unwrap();
-        let (w, h) = (map.dims().image_w as u32, map.dims().image_h as u32);
-        let out = map.step(&f.frame(1, w, h)).unwrap().clone();
+        let (map, out) = stepped(engine(), &f);
         for (name, d) in check_stages(&map, &f, &format!("{what} frame {index}")) {
             println!("{what} frame {index} {name}: max abs diff {d:.2e} (tolerance {STAGE_TOL:e})");
         }
@@ -188,28 +208,11 @@ pub const STAGE_BUFFERS: [&str; 8] = [
 /// When a step fails.
 #[must_use]
 pub fn stage_buffers(engine: impl Fn() -> TractEngine) -> Vec<(String, Vec<f32>, Vec<f32>)> {
-    use satmap_runtime::satellite::FixedCrop;
     let mut out = Vec::new();
     for index in 0..2 {
         let f = GoldenFrame::load(index);
-        let mut map = SatMap::new(
-            engine(),
-            &crate::golden::calibration(),
-            FixedCrop(&f.satellite),
-        )
-        .unwrap();
-        let (w, h) = (map.dims().image_w as u32, map.dims().image_h as u32);
-        map.step(&f.frame(1, w, h)).unwrap();
-        for (name, got) in STAGE_BUFFERS.iter().zip([
-            map.value(),
-            map.query(),
-            map.weights(),
-            map.gathered(),
-            map.camera_bev(),
-            map.satellite_bev(),
-            map.logits(),
-            map.points(),
-        ]) {
+        let (map, _) = stepped(engine(), &f);
+        for (name, got) in STAGE_BUFFERS.iter().zip(buffers(&map)) {
             out.push((
                 format!("frame {index} {name}"),
                 got.to_vec(),
