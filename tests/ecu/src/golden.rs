@@ -93,13 +93,22 @@ impl Golden {
         SafeTensors::deserialize(&self.bytes).unwrap()
     }
 
-    fn data(&self, name: &str, dtype: safetensors::Dtype) -> Vec<u8> {
+    /// Tensor `name`, asserted of type `dtype`, read as little-endian values of `W` bytes.
+    fn values<T, const W: usize>(
+        &self,
+        name: &str,
+        dtype: safetensors::Dtype,
+        from_le: fn([u8; W]) -> T,
+    ) -> Vec<T> {
         let st = self.st();
         let t = st
             .tensor(name)
             .unwrap_or_else(|e| panic!("golden tensor {name}: {e}"));
         assert_eq!(t.dtype(), dtype, "{name}");
-        t.data().to_vec()
+        t.data()
+            .chunks_exact(W)
+            .map(|b| from_le(b.try_into().unwrap()))
+            .collect()
     }
 
     /// Raw little-endian bytes of a tensor.
@@ -117,10 +126,7 @@ impl Golden {
     /// When the tensor is missing or of another type.
     #[must_use]
     pub fn f32s(&self, name: &str) -> Vec<f32> {
-        let d = self.data(name, safetensors::Dtype::F32);
-        d.chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect()
+        self.values(name, safetensors::Dtype::F32, f32::from_le_bytes)
     }
 
     /// An F64 tensor.
@@ -129,10 +135,7 @@ impl Golden {
     /// When the tensor is missing or of another type.
     #[must_use]
     pub fn f64s(&self, name: &str) -> Vec<f64> {
-        let d = self.data(name, safetensors::Dtype::F64);
-        d.chunks_exact(8)
-            .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
-            .collect()
+        self.values(name, safetensors::Dtype::F64, f64::from_le_bytes)
     }
 
     /// An I64 tensor.
@@ -141,10 +144,7 @@ impl Golden {
     /// When the tensor is missing or of another type.
     #[must_use]
     pub fn i64s(&self, name: &str) -> Vec<i64> {
-        let d = self.data(name, safetensors::Dtype::I64);
-        d.chunks_exact(8)
-            .map(|b| i64::from_le_bytes(b.try_into().unwrap()))
-            .collect()
+        self.values(name, safetensors::Dtype::I64, i64::from_le_bytes)
     }
 
     /// An I32 tensor.
@@ -153,10 +153,7 @@ impl Golden {
     /// When the tensor is missing or of another type.
     #[must_use]
     pub fn i32s(&self, name: &str) -> Vec<i32> {
-        let d = self.data(name, safetensors::Dtype::I32);
-        d.chunks_exact(4)
-            .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect()
+        self.values(name, safetensors::Dtype::I32, i32::from_le_bytes)
     }
 }
 
