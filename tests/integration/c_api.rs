@@ -1,8 +1,8 @@
 //! The ECU integration surface over the committed compiled `test` bundle: the C API (called from Rust
 //! here, from C in `examples/c/replay.c`), caller-placed regions, the staged step and the
 //! protected map frame, on the committed scenario `examples/c/scenario.bin` (made from the
-//! golden inputs; `SATMAP_BLESS=1` rewrites it and `expected-<kernel family>.txt`, the Rust
-//! run's digests on this CPU's family of tract kernels, that the C example compares against).
+//! golden inputs; it and its digests per kernel family are kept current by the ECU tests,
+//! `tests/ecu/tests/ecu/scenario.rs`, whose library builds the scenario's frames here too).
 
 use std::ffi::CString;
 

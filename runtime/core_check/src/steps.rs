@@ -56,41 +56,47 @@ struct Golden<'a> {
 }
 
 impl<'a> Golden<'a> {
-    fn raw(&self, name: &'static str, dtype: Dtype, len: usize) -> Result<&'a [u8], CheckFault> {
+    /// Tensor `name`'s bytes: of type `dtype` and exactly `len_bytes` long.
+    fn raw(
+        &self,
+        name: &'static str,
+        dtype: Dtype,
+        len_bytes: usize,
+    ) -> Result<&'a [u8], CheckFault> {
         let t = self.st.tensor(name).map_err(|_| CheckFault::Golden(name))?;
-        let width = match dtype {
-            Dtype::U8 => 1,
-            Dtype::F32 => 4,
-            Dtype::F64 => 8,
-            _ => return Err(CheckFault::Golden(name)),
-        };
-        if t.dtype() != dtype || t.data().len() != len * width {
+        if t.dtype() != dtype || t.data().len() != len_bytes {
             return Err(CheckFault::Golden(name));
         }
         Ok(t.data())
     }
 
-    fn f32s(&self, name: &'static str, len: usize) -> Result<Vec<f32>, CheckFault> {
-        let d = self.raw(name, Dtype::F32, len)?;
-        Ok(d.chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    /// Tensor `name` as `len` little-endian values of `W` bytes.
+    fn values<T, const W: usize>(
+        &self,
+        name: &'static str,
+        dtype: Dtype,
+        len: usize,
+        from_le: fn([u8; W]) -> T,
+    ) -> Result<Vec<T>, CheckFault> {
+        let d = self.raw(name, dtype, len * W)?;
+        Ok(d.chunks_exact(W)
+            .map(|b| {
+                let mut bytes = [0u8; W];
+                bytes.copy_from_slice(b);
+                from_le(bytes)
+            })
             .collect())
     }
 
-    fn f64s<const N: usize>(&self, name: &'static str) -> Result<[f64; N], CheckFault> {
-        let d = self.raw(name, Dtype::F64, N)?;
-        let mut out = [0.0; N];
-        for (o, b) in out.iter_mut().zip(d.chunks_exact(8)) {
-            let mut bytes = [0u8; 8];
-            bytes.copy_from_slice(b);
-            *o = f64::from_le_bytes(bytes);
-        }
-        Ok(out)
+    fn f32s(&self, name: &'static str, len: usize) -> Result<Vec<f32>, CheckFault> {
+        self.values(name, Dtype::F32, len, f32::from_le_bytes)
     }
 
     fn vec3(&self, name: &'static str) -> Result<Vec3, CheckFault> {
-        let [x, y, z] = self.f64s::<3>(name)?;
-        Ok(Vec3::new(x as f32, y as f32, z as f32))
+        match self.values(name, Dtype::F64, 3, f64::from_le_bytes)?[..] {
+            [x, y, z] => Ok(Vec3::new(x as f32, y as f32, z as f32)),
+            _ => Err(CheckFault::Golden(name)),
+        }
     }
 }
 
@@ -145,7 +151,9 @@ pub fn run(golden: &[u8]) -> Result<CoreDigests, CheckFault> {
     let gathered_digest = h.digest();
 
     // The CAN-bus vector from the golden pose and motion.
-    let [yaw_rad] = g.f64s::<1>("ego_yaw_rad")?;
+    let &[yaw_rad] = &g.values("ego_yaw_rad", Dtype::F64, 1, f64::from_le_bytes)?[..] else {
+        return Err(CheckFault::Golden("ego_yaw_rad"));
+    };
     let pose = EgoPose::new(DVec2::ZERO, yaw_rad);
     let motion = EgoMotion {
         acceleration_mps2: g.vec3("acceleration_mps2")?,

@@ -1,12 +1,13 @@
 //! The one rule that names the family of f32 kernels tract 0.23.9 runs on this CPU. Digests
 //! committed from a run (the C example's, the harness's) are kept per family, so every consumer
-//! asks this module: Rust directly, C through `satmap_kernel_family()`, the Makefile and Python
-//! through `satmap-sim kernel-family`. No other copy of the rule exists.
+//! asks this module: Rust directly, C through `satmap_kernel_family()` (the C example picks its
+//! digest file with it), Python and scripts through `satmap-sim kernel-family`. No other copy of
+//! the rule exists.
 //!
 //! Outputs are bit-identical run to run and across thread counts within a family, not across
 //! families: the kernels' tiling changes the summation order (measured: the demo drive's run
-//! digest differs between an AVX-512 Xeon, an AVX-512 EPYC, an AVX2 EPYC and a NEON core, values
-//! within 2e-5).
+//! digest differs between an AVX-512 Xeon, an AVX-512 EPYC and an AVX2 EPYC, values within 2e-5;
+//! the C scenario's digests differ again on a NEON core, `examples/c/expected-aarch64-neon.txt`).
 
 use core::ffi::CStr;
 

@@ -204,7 +204,8 @@ impl GoldenFrame {
         self.frame_with(sequence, width_px, height_px, 0b11_1111)
     }
 
-    /// The step input for this golden frame with the cameras of `present` (bit c: camera c).
+    /// The step input for this golden frame with the cameras of `present` (bit c: camera c),
+    /// at 1 s + `sequence` x 100 ms.
     #[must_use]
     pub fn frame_with(
         &self,
@@ -213,11 +214,25 @@ impl GoldenFrame {
         height_px: u32,
         present: u8,
     ) -> Frame<'_> {
+        let timestamp_us = 1_000_000 + sequence * 100_000;
+        self.frame_at(sequence, timestamp_us, width_px, height_px, present)
+    }
+
+    /// The step input for this golden frame at `timestamp_us` (every image captured then) with
+    /// the cameras of `present` (bit c: camera c).
+    #[must_use]
+    pub fn frame_at(
+        &self,
+        sequence: u64,
+        timestamp_us: u64,
+        width_px: u32,
+        height_px: u32,
+        present: u8,
+    ) -> Frame<'_> {
         let per = (width_px * height_px * 3) as usize;
-        let ts = 1_000_000 + sequence * 100_000;
         Frame {
             sequence,
-            timestamp_us: ts,
+            timestamp_us,
             pose: self.pose,
             motion: self.motion,
             images: core::array::from_fn(|c| {
@@ -225,7 +240,7 @@ impl GoldenFrame {
                     width_px,
                     height_px,
                     rgb: &self.images[c * per..(c + 1) * per],
-                    capture_us: ts,
+                    capture_us: timestamp_us,
                     valid: true,
                 })
             }),

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use satmap_runtime::engine_tract::kernel_family;
 use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};
-use satmap_runtime::{CameraImage, EgoPose, Frame, MapFrame, SatMap};
+use satmap_runtime::{EgoPose, Frame, MapFrame, SatMap};
 
 use crate::golden::{GoldenFrame, calibration, compiled_engine, root};
 
@@ -142,23 +142,14 @@ impl SatelliteSource for SwitchCrop {
 /// The step input of `s` from golden frame `g`.
 #[must_use]
 pub fn frame<'a>(g: &'a GoldenFrame, s: Step) -> Frame<'a> {
-    let per = g.images.len() / 6;
-    let ts = timestamp_us(s.sequence);
-    Frame {
-        sequence: s.sequence,
-        timestamp_us: ts,
-        pose: g.pose,
-        motion: g.motion,
-        images: core::array::from_fn(|c| {
-            (s.present >> c & 1 == 1).then(|| CameraImage {
-                width_px: 320,
-                height_px: 180,
-                rgb: &g.images[c * per..(c + 1) * per],
-                capture_us: ts,
-                valid: true,
-            })
-        }),
-    }
+    let dims = satmap_runtime::ModelDims::test_config();
+    g.frame_at(
+        s.sequence,
+        timestamp_us(s.sequence),
+        dims.image_w as u32,
+        dims.image_h as u32,
+        s.present,
+    )
 }
 
 /// The Rust run of the scenario: one-call steps on heap buffers, over the compiled bundle the C
