@@ -6,3 +6,4 @@
 pub mod golden;
 pub mod parity;
 pub mod scenario;
+pub mod stages;

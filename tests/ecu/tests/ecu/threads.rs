@@ -5,61 +5,21 @@
 
 use std::num::NonZeroUsize;
 
-use satmap_ecu_tests::golden::{Golden, bundle_dir, compiled_engine};
-use satmap_runtime::Engine;
+use satmap_ecu_tests::golden::compiled_engine;
+use satmap_ecu_tests::stages::{ReferenceInputs, StageOutputs};
+use satmap_runtime::Stage;
 use satmap_runtime::engine_tract::TractEngine;
 
 const TWO: NonZeroUsize = NonZeroUsize::new(2).unwrap();
 
-/// Every stage's outputs on the folder bundle's `reference.safetensors` inputs (the onnxruntime
-/// reference's own), as raw bits, in stage order.
+/// Every stage's outputs on the reference inputs, as raw bits, in stage order.
 fn stage_outputs(engine: &mut TractEngine) -> Vec<Vec<u32>> {
-    let r = Golden::from_path(&bundle_dir().join("reference.safetensors"));
-    let d = engine.dims().clone();
-    let mut value = vec![0.0; d.value_len()];
-    let mut query = vec![0.0; d.bev_len()];
-    let mut weights = vec![0.0; d.weights_len()];
-    let mut camera_bev = vec![0.0; d.bev_len()];
-    let mut satellite_bev = vec![0.0; d.bev_len()];
-    let mut logits = vec![0.0; d.logits_len()];
-    let mut points = vec![0.0; d.points_len()];
-    let can_bus: [f32; 18] = r.f32s("bev_query.can_bus").try_into().unwrap();
-    engine
-        .encode_image(0, &r.bytes("image_encoder.image"), &mut value)
-        .unwrap();
-    engine
-        .bev_query(&can_bus, &mut query, &mut weights)
-        .unwrap();
-    engine
-        .bev_encode(
-            &r.f32s("bev_encoder.bev_query"),
-            &r.f32s("bev_encoder.gathered"),
-            &mut camera_bev,
-        )
-        .unwrap();
-    engine
-        .encode_satellite(&r.bytes("satellite_encoder.satellite"), &mut satellite_bev)
-        .unwrap();
-    engine
-        .decode_map(
-            &r.f32s("map_decoder.camera_bev"),
-            &r.f32s("map_decoder.satellite_bev"),
-            &mut logits,
-            &mut points,
-        )
-        .unwrap();
-    [
-        value,
-        query,
-        weights,
-        camera_bev,
-        satellite_bev,
-        logits,
-        points,
-    ]
-    .iter()
-    .map(|v| v.iter().map(|x| x.to_bits()).collect())
-    .collect()
+    let r = ReferenceInputs::load();
+    let mut out = StageOutputs::new(engine);
+    for stage in Stage::ALL {
+        out.run(engine, stage, &r).unwrap();
+    }
+    out.bits()
 }
 
 fn engine_threads() -> Vec<String> {
