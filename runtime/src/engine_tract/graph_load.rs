@@ -1,0 +1,195 @@
+//! Stage graphs from a bundle's bytes to tract's typed model: the NNEF graph of a compiled
+//! bundle (its f16 form given the arithmetic this core has), or with the `onnx` feature the ONNX
+//! file of a folder bundle; inputs and outputs bound by name and checked against the manifest.
+
+use tract_nnef::framework::Nnef;
+use tract_nnef::prelude::*;
+
+use crate::bundle::{BundleError, DType, Precision, StageEntry, TensorSpec};
+use crate::engine::Stage;
+
+pub(crate) fn datum(dtype: DType) -> DatumType {
+    match dtype {
+        DType::U8 => DatumType::U8,
+        DType::I64 => DatumType::I64,
+        DType::F32 => DatumType::F32,
+    }
+}
+
+/// tract's error for `stage`, with its whole context chain.
+pub(crate) fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError + Copy {
+    move |e| BundleError::Engine {
+        stage: stage.name(),
+        message: format!("{e:#}"),
+    }
+}
+
+/// The typed model of a compiled stage: its NNEF tar read through tract-core's registry, names
+/// bound, and an f16 graph widened to f32: this target has no f16 arithmetic (on x86 tract's
+/// f16 kernels are portable fallbacks, tens of times slower than f32), so the f16 bundle is an
+/// f16 *storage* format here. The widened constants fold into f32 ones when the plan is
+/// optimised, so a stage's RAM is what the f32 bundle's is; its flash is about half (57% of the
+/// f32 file on `test`).
+pub(crate) fn nnef_model(
+    stage: Stage,
+    nnef: &Nnef,
+    bytes: &[u8],
+    entry: &StageEntry,
+    precision: Precision,
+) -> Result<TypedModel, BundleError> {
+    use tract_nnef::tract_core::floats::FloatPrecisionTranslator;
+    use tract_nnef::tract_core::transform::ModelTransform as _;
+    let engine_err = engine_error(stage);
+    let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
+    check_io_names(stage, &graph_io_names(&model)?, entry)?;
+    match precision {
+        Precision::F16 => FloatPrecisionTranslator::new(f16::datum_type(), f32::datum_type())
+            .transform_into(model)
+            .map_err(engine_err),
+        Precision::F32 | Precision::Int8 => Ok(model),
+    }
+}
+
+/// The typed model of an ONNX stage: parsed, names bound, static input facts from the manifest.
+#[cfg(feature = "onnx")]
+pub(crate) fn onnx_model(
+    stage: Stage,
+    bytes: &[u8],
+    entry: &StageEntry,
+) -> Result<TypedModel, BundleError> {
+    use tract_onnx::prelude::{Framework as _, InferenceFact, InferenceModelExt as _};
+    let engine_err = engine_error(stage);
+    let mut model = tract_onnx::onnx()
+        .model_for_read(&mut &bytes[..])
+        .map_err(engine_err)?;
+    check_io_names(stage, &graph_io_names(&model)?, entry)?;
+    for (ix, spec) in entry.inputs.iter().enumerate() {
+        model = model
+            .with_input_fact(ix, InferenceFact::dt_shape(datum(spec.dtype), &spec.shape))
+            .map_err(engine_err)?;
+    }
+    model.into_typed().map_err(engine_err)
+}
+
+/// Without the ONNX front end (the ECU build) a folder bundle is refused, not guessed at.
+#[cfg(not(feature = "onnx"))]
+pub(crate) fn onnx_model(
+    stage: Stage,
+    _: &[u8],
+    _: &StageEntry,
+) -> Result<TypedModel, BundleError> {
+    Err(BundleError::Format {
+        path: stage.name().into(),
+        format: crate::bundle::GraphFormat::Onnx,
+        needs: "the `onnx` feature; compile them with `satmap-sim compile` for this engine",
+    })
+}
+
+/// The names of a graph's inputs (their source nodes) and outputs (their labels), in order.
+fn graph_io_names<F, O>(model: &Graph<F, O>) -> Result<(Vec<String>, Vec<String>), BundleError>
+where
+    F: Fact + Clone + 'static,
+    O: std::fmt::Debug + std::fmt::Display + AsRef<dyn Op> + AsMut<dyn Op> + Clone + 'static,
+{
+    let inputs = model
+        .inputs
+        .iter()
+        .map(|o| model.node(o.node).name.clone())
+        .collect();
+    let outputs = model
+        .outputs
+        .iter()
+        .map(|&o| {
+            model
+                .outlet_label(o)
+                .unwrap_or(model.node(o.node).name.as_str())
+                .to_owned()
+        })
+        .collect();
+    Ok((inputs, outputs))
+}
+
+/// Bind by name: the graph's inputs and outputs must carry the manifest's names in the
+/// manifest's order (which [`crate::bundle::StageEntry::check_interface`] has checked is the
+/// runtime's). Two same-shape tensors swapped in the graph would otherwise load and run with
+/// each buffer fed to the other's place.
+fn check_io_names(
+    stage: Stage,
+    (input_names, output_names): &(Vec<String>, Vec<String>),
+    entry: &StageEntry,
+) -> Result<(), BundleError> {
+    for (what, names, specs) in [
+        ("input", input_names, &entry.inputs),
+        ("output", output_names, &entry.outputs),
+    ] {
+        if names.len() != specs.len() {
+            return Err(BundleError::Interface {
+                stage: stage.name(),
+                what,
+                tensor: "*".into(),
+                found: format!("{} tensors in the graph", names.len()),
+                expected: format!("{} tensors", specs.len()),
+            });
+        }
+        for (ix, (name, spec)) in names.iter().zip(specs).enumerate() {
+            if *name != spec.name {
+                return Err(BundleError::Interface {
+                    stage: stage.name(),
+                    what,
+                    tensor: spec.name.clone(),
+                    found: format!("graph {what} {ix} named `{name}`"),
+                    expected: format!("`{}` at position {ix}", spec.name),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Check a typed model's input and output facts against the manifest.
+pub(crate) fn check_graph_io(
+    stage: Stage,
+    model: &TypedModel,
+    inputs: &[TensorSpec],
+    outputs: &[TensorSpec],
+) -> Result<(), BundleError> {
+    let check = |what: &'static str, facts: Vec<TractResult<&TypedFact>>, specs: &[TensorSpec]| {
+        if facts.len() != specs.len() {
+            return Err(BundleError::Interface {
+                stage: stage.name(),
+                what,
+                tensor: "*".into(),
+                found: format!("{} tensors in the graph", facts.len()),
+                expected: format!("{} tensors", specs.len()),
+            });
+        }
+        for (fact, spec) in facts.into_iter().zip(specs) {
+            let fact = fact.map_err(engine_error(stage))?;
+            let shape: Option<Vec<usize>> = fact.shape.as_concrete().map(<[usize]>::to_vec);
+            if fact.datum_type != datum(spec.dtype) || shape.as_deref() != Some(&spec.shape[..]) {
+                return Err(BundleError::Interface {
+                    stage: stage.name(),
+                    what,
+                    tensor: spec.name.clone(),
+                    found: format!("{:?} {:?}", fact.datum_type, fact.shape),
+                    expected: format!("{:?} {:?}", spec.dtype, spec.shape),
+                });
+            }
+        }
+        Ok(())
+    };
+    check(
+        "input",
+        (0..model.inputs.len())
+            .map(|i| model.input_fact(i))
+            .collect(),
+        inputs,
+    )?;
+    check(
+        "output",
+        (0..model.outputs.len())
+            .map(|i| model.output_fact(i))
+            .collect(),
+        outputs,
+    )
+}
