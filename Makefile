@@ -10,7 +10,7 @@ PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
 .PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers \
-  cross-toolchain test-aarch64 test-baremetal test-targets
+  cross-toolchain test-aarch64 test-baremetal test-targets insn-counts
 
 # The demo runs the binary `make test` builds (the same cargo command, so the dependency tree is
 # compiled once for both): the test profile, opt-level 3 for ours and tract's engine, the
@@ -187,3 +187,9 @@ test-baremetal: cross-toolchain
 	bash targets/baremetal.sh
 
 test-targets: test-aarch64 test-baremetal
+
+# Instructions retired per stage on the application core (docs/perf.md, "On ARM"): our engine's
+# f32/f16/int8 bundles and onnxruntime's aarch64 wheel, under qemu-aarch64 rebuilt with TCG
+# plugins from Debian's qemu source (once, ~5 min). A person's command, not a CI step: ~15 min.
+insn-counts: cross-toolchain
+	SATMAP_ORT_COUNTS=1 bash targets/insn_counts.sh
