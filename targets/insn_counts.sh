@@ -18,7 +18,7 @@ CROSS=targets/in-chroot.sh
 TARGET=aarch64-unknown-linux-gnu
 N=${SATMAP_INSN_REPEATS:-8}
 STAGES=(image_encoder bev_query bev_encoder satellite_encoder map_decoder)
-PRECISIONS=(${SATMAP_INSN_PRECISIONS:-f32 f16 int8})
+PRECISIONS=(${SATMAP_INSN_PRECISIONS:-f32 f16-widened f16 int8})
 
 bash targets/toolchain.sh
 bash targets/qemu_plugins.sh

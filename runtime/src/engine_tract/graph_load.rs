@@ -24,30 +24,98 @@ pub(crate) fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError +
     }
 }
 
+/// Where an f16 bundle's arithmetic runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum HalfArithmetic {
+    /// In f16, on a core with f16 arithmetic (Armv8.2-A FEAT_FP16: Cortex-A55/A75 and later,
+    /// every listed ECU application core but the A72): the stored graph runs as it is, with a
+    /// cast at each float input and output, so the runtime's buffers stay f32. tract then picks
+    /// its fp16 kernels (twice the lanes of f32 per NEON instruction).
+    Native,
+    /// Widened to f32 at load: f16-rounded weights, f32 arithmetic, f32 RAM (the widened
+    /// constants fold into f32 ones when the plan is optimised). Where the core has no f16
+    /// arithmetic (x86 here, where tract's f16 kernels are portable fallbacks tens of times
+    /// slower than f32) and wherever f32 arithmetic is wanted.
+    Widened,
+}
+
+impl HalfArithmetic {
+    /// [`Native`](Self::Native) where tract finds f16 arithmetic on this core (on Linux it reads
+    /// `/proc/cpuinfo`'s `asimdhp`; on an OS without it, such as QNX, this answers `Widened`),
+    /// [`Widened`](Self::Widened) elsewhere.
+    #[must_use]
+    pub fn of_this_core() -> Self {
+        if tract_linalg::has_fp16() {
+            Self::Native
+        } else {
+            Self::Widened
+        }
+    }
+
+    /// `native` or `widened`.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Native => "native",
+            Self::Widened => "widened",
+        }
+    }
+}
+
 /// The typed model of a compiled stage: its NNEF tar read through tract-core's registry, names
-/// bound, and an f16 graph widened to f32: this target has no f16 arithmetic (on x86 tract's
-/// f16 kernels are portable fallbacks, tens of times slower than f32), so the f16 bundle is an
-/// f16 *storage* format here. The widened constants fold into f32 ones when the plan is
-/// optimised, so a stage's RAM is what the f32 bundle's is; its flash is about half (57% of the
-/// f32 file on `test`).
+/// bound, and an f16 graph run as `half` says (an f16 bundle is half the flash of the f32 one:
+/// 57% of the f32 file on `test`), with the arithmetic it got: a stage with index arithmetic
+/// runs [`HalfArithmetic::Widened`] whatever was asked; `None` for an f32 or int8 graph.
 pub(crate) fn nnef_model(
     stage: Stage,
     nnef: &Nnef,
     bytes: &[u8],
     entry: &StageEntry,
     precision: Precision,
-) -> Result<TypedModel, BundleError> {
+    half: HalfArithmetic,
+) -> Result<(TypedModel, Option<HalfArithmetic>), BundleError> {
     use tract_nnef::tract_core::floats::FloatPrecisionTranslator;
     use tract_nnef::tract_core::transform::ModelTransform as _;
     let engine_err = engine_error(stage);
     let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
     check_io_names(stage, &graph_io_names(&model)?, entry)?;
-    match precision {
-        Precision::F16 => FloatPrecisionTranslator::new(f16::datum_type(), f32::datum_type())
+    let (f16, f32) = (f16::datum_type(), f32::datum_type());
+    match (precision, half) {
+        (Precision::F16, HalfArithmetic::Widened) => FloatPrecisionTranslator::new(f16, f32)
             .transform_into(model)
+            .map(|m| (m, Some(HalfArithmetic::Widened)))
             .map_err(engine_err),
-        Precision::F32 | Precision::Int8 => Ok(model),
+        // A stage with index arithmetic runs widened whole (see `has_index_arithmetic`).
+        (Precision::F16, HalfArithmetic::Native) if has_index_arithmetic(&model) => {
+            FloatPrecisionTranslator::new(f16, f32)
+                .transform_into(model)
+                .map(|m| (m, Some(HalfArithmetic::Widened)))
+                .map_err(engine_err)
+        }
+        // The translator always turns sources to f32 and casts the graph's outputs back to
+        // f32; a filter that translates no other node keeps every operator in f16.
+        (Precision::F16, HalfArithmetic::Native) => {
+            FloatPrecisionTranslator::with_filter(f16, f32, |_| false)
+                .transform_into(model)
+                .map(|m| (m, Some(HalfArithmetic::Native)))
+                .map_err(engine_err)
+        }
+        (Precision::F32 | Precision::Int8, _) => Ok((model, None)),
     }
+}
+
+/// Whether any operator of `model` turns a float into something else (a cast to an index, a
+/// comparison): index arithmetic. f16 holds integers exactly only up to 2048, and `test`'s
+/// `bev_query` (bilinear sampling: floor, clamp, flat index) gathered past its table in f16, a
+/// panic inside tract. Keeping only that arithmetic in f32 (the float cone above each such
+/// operator, through tract's translator filter) still gathered past the table, for a reason not
+/// found; a whole stage widened is the rule that holds.
+fn has_index_arithmetic(model: &TypedModel) -> bool {
+    let is_float = |o: &OutletId| model.outlet_fact(*o).is_ok_and(|f| f.datum_type.is_float());
+    model.nodes.iter().any(|n| {
+        n.inputs.iter().any(is_float)
+            && !(0..n.outputs.len()).any(|i| is_float(&OutletId::new(n.id, i)))
+    })
 }
 
 /// The typed model of an ONNX stage: parsed, names bound, static input facts from the manifest.

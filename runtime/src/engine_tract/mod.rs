@@ -53,6 +53,7 @@ use crate::bundle::{Bundle, BundleError, GraphFormat};
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
+pub use graph_load::HalfArithmetic;
 pub(crate) use graph_load::onnx_model;
 pub(crate) use graph_load::{check_graph_io, datum, engine_error, nnef_model};
 pub use kernel_family::{KernelFamily, kernel_family};
@@ -68,18 +69,30 @@ struct StageRunner {
     rewrites: Rewrites,
     /// tract's message of the last failed run (the core error carries only a code).
     last_error: Option<String>,
+    /// The arithmetic of an f16 stage (`None`: an f32 or int8 graph).
+    half: Option<HalfArithmetic>,
 }
 
 impl StageRunner {
-    fn load(bundle: &Bundle, nnef: &Nnef, stage: Stage) -> Result<Self, BundleError> {
+    fn load(
+        bundle: &Bundle,
+        nnef: &Nnef,
+        stage: Stage,
+        half: HalfArithmetic,
+    ) -> Result<Self, BundleError> {
         let entry = bundle.manifest().stage(stage)?;
         let bytes = bundle.read_stage(stage)?;
         let engine_err = engine_error(stage);
-        let model = match bundle.format() {
-            GraphFormat::Nnef => {
-                nnef_model(stage, nnef, &bytes, entry, bundle.manifest().precision)?
-            }
-            GraphFormat::Onnx => onnx_model(stage, &bytes, entry)?,
+        let (model, half) = match bundle.format() {
+            GraphFormat::Nnef => nnef_model(
+                stage,
+                nnef,
+                &bytes,
+                entry,
+                bundle.manifest().precision,
+                half,
+            )?,
+            GraphFormat::Onnx => (onnx_model(stage, &bytes, entry)?, None),
         };
         drop(bytes);
         let (model, rewrites) = model
@@ -112,6 +125,7 @@ impl StageRunner {
             output_lens,
             rewrites,
             last_error: None,
+            half,
         })
     }
 
@@ -250,13 +264,21 @@ impl core::fmt::Debug for TractEngine {
 }
 
 impl TractEngine {
-    /// Load, optimise and plan every stage of `bundle`.
+    /// Load, optimise and plan every stage of `bundle`; an f16 bundle in the arithmetic this
+    /// core has ([`HalfArithmetic::of_this_core`]).
     pub fn load(bundle: &Bundle) -> Result<Self, BundleError> {
+        Self::load_with(bundle, HalfArithmetic::of_this_core())
+    }
+
+    /// [`TractEngine::load`] with an f16 bundle's arithmetic chosen by the caller (an f32 or
+    /// int8 bundle ignores it). [`HalfArithmetic::Native`] on a core without f16 arithmetic
+    /// runs tract's portable f16 kernels: correct, and slow.
+    pub fn load_with(bundle: &Bundle, half: HalfArithmetic) -> Result<Self, BundleError> {
         // tract-core's operators only: a graph that needs another registry is refused at load.
         let nnef = tract_nnef::nnef();
         let runners = Stage::ALL
             .iter()
-            .map(|&stage| StageRunner::load(bundle, &nnef, stage))
+            .map(|&stage| StageRunner::load(bundle, &nnef, stage, half))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             dims: bundle.dims().clone(),
@@ -264,6 +286,13 @@ impl TractEngine {
             executor: Executor::SingleThread,
             threads: NonZeroUsize::MIN,
         })
+    }
+
+    /// The arithmetic `stage` of an f16 bundle runs in (a stage with index arithmetic runs
+    /// [`HalfArithmetic::Widened`] whatever was asked); `None` for an f32 or int8 bundle.
+    #[must_use]
+    pub fn half_arithmetic(&self, stage: Stage) -> Option<HalfArithmetic> {
+        self.runners.get(stage as usize)?.half
     }
 
     /// Run every later stage on `threads` threads: 1 is the calling thread alone; more start a

@@ -6,8 +6,8 @@ use tract_nnef::internal::*;
 
 use crate::bundle::Bundle;
 use crate::engine::Stage;
-use crate::engine_tract::nnef_model;
 use crate::engine_tract::rewrite::{Pass, Rewrites, optimise_before};
+use crate::engine_tract::{HalfArithmetic, nnef_model};
 
 /// The repository root (the runtime crate's parent).
 pub(crate) fn root() -> std::path::PathBuf {
@@ -49,10 +49,18 @@ pub(crate) fn committed_stage(stage: Stage) -> TypedModel {
     let bytes = bundle.read_stage(stage).expect("stage bytes");
     let entry = bundle.manifest().stage(stage).expect("entry");
     let nnef = tract_nnef::nnef();
-    nnef_model(stage, &nnef, &bytes, entry, bundle.manifest().precision)
-        .expect("model")
-        .into_decluttered()
-        .expect("declutter")
+    nnef_model(
+        stage,
+        &nnef,
+        &bytes,
+        entry,
+        bundle.manifest().precision,
+        HalfArithmetic::Widened,
+    )
+    .expect("model")
+    .0
+    .into_decluttered()
+    .expect("declutter")
 }
 
 /// [`committed_stage`] through the engine's rewrites that run before `stop`: the graph `stop`

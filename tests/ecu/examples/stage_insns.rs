@@ -4,26 +4,34 @@
 //! runs exactly: loading, planning and the first run's lazy set-up cancel out.
 //!
 //! ```text
-//! stage_insns f32|f16|int8 image_encoder|bev_query|bev_encoder|satellite_encoder|map_decoder REPEATS
+//! stage_insns f32|f16|f16-widened|int8 image_encoder|bev_query|bev_encoder|satellite_encoder|map_decoder REPEATS
 //! ```
+//!
+//! `f16` runs the f16 bundle in the arithmetic this core has (f16 on FEAT_FP16), `f16-widened`
+//! in f32 arithmetic.
 
 use std::process::ExitCode;
 
 use satmap_ecu_tests::golden::compiled_path;
 use satmap_ecu_tests::stages::{ReferenceInputs, StageOutputs};
 use satmap_runtime::Stage;
-use satmap_runtime::bundle::Precision;
-use satmap_runtime::engine_tract::{TractEngine, kernel_family};
+use satmap_runtime::bundle::{Bundle, Precision};
+use satmap_runtime::engine_tract::{HalfArithmetic, TractEngine, kernel_family};
 
-fn parse(args: &[String]) -> Result<(Precision, Stage, usize), String> {
+fn parse(args: &[String]) -> Result<(Precision, HalfArithmetic, Stage, usize), String> {
     let [_, precision, stage, repeats] = args else {
-        return Err("usage: stage_insns f32|f16|int8 STAGE REPEATS".into());
+        return Err("usage: stage_insns f32|f16|f16-widened|int8 STAGE REPEATS".into());
     };
-    let precision = match precision.as_str() {
-        "f32" => Precision::F32,
-        "f16" => Precision::F16,
-        "int8" => Precision::Int8,
-        other => return Err(format!("precision {other:?}: one of f32, f16, int8")),
+    let (precision, half) = match precision.as_str() {
+        "f32" => (Precision::F32, HalfArithmetic::Widened),
+        "f16" => (Precision::F16, HalfArithmetic::of_this_core()),
+        "f16-widened" => (Precision::F16, HalfArithmetic::Widened),
+        "int8" => (Precision::Int8, HalfArithmetic::Widened),
+        other => {
+            return Err(format!(
+                "precision {other:?}: one of f32, f16, f16-widened, int8"
+            ));
+        }
     };
     let stage = Stage::ALL
         .into_iter()
@@ -32,12 +40,12 @@ fn parse(args: &[String]) -> Result<(Precision, Stage, usize), String> {
     let repeats = repeats
         .parse()
         .map_err(|e| format!("repeats {repeats:?}: {e}"))?;
-    Ok((precision, stage, repeats))
+    Ok((precision, half, stage, repeats))
 }
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
-    let (precision, stage, repeats) = match parse(&args) {
+    let (precision, half, stage, repeats) = match parse(&args) {
         Ok(p) => p,
         Err(e) => {
             eprintln!("{e}");
@@ -45,7 +53,7 @@ fn main() -> ExitCode {
         }
     };
     let path = compiled_path(precision);
-    let mut engine = match TractEngine::open(&path) {
+    let mut engine = match Bundle::open(&path).and_then(|b| TractEngine::load_with(&b, half)) {
         Ok(e) => e,
         Err(e) => {
             eprintln!("{}: {e}", path.display());
@@ -69,9 +77,12 @@ fn main() -> ExitCode {
             (h ^ u64::from(x.to_bits())).wrapping_mul(0x100_0000_01b3)
         });
     println!(
-        "{} {stage} x{repeats} kernel_family={} digest={digest:016x}",
+        "{} {stage} x{repeats} kernel_family={} f16_arithmetic={} digest={digest:016x}",
         path.display(),
-        kernel_family()
+        kernel_family(),
+        engine
+            .half_arithmetic(stage)
+            .map_or("-", HalfArithmetic::name),
     );
     ExitCode::SUCCESS
 }

@@ -6,9 +6,9 @@
 use std::path::PathBuf;
 
 use safetensors::SafeTensors;
-use satmap_runtime::bundle::Precision;
+use satmap_runtime::bundle::{Bundle, Precision};
 use satmap_runtime::calibration::{Calibration, from_toml_file};
-use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::engine_tract::{HalfArithmetic, TractEngine};
 use satmap_runtime::glam::{DVec2, Vec3};
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame};
 
@@ -61,6 +61,18 @@ pub fn compiled_engine() -> TractEngine {
 pub fn compiled_engine_as(precision: Precision) -> TractEngine {
     let path = compiled_path(precision);
     TractEngine::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The tract engine over the committed compiled f16 `test` bundle in the arithmetic `half`.
+///
+/// # Panics
+/// When the committed bundle does not load.
+#[must_use]
+pub fn compiled_f16_engine(half: HalfArithmetic) -> TractEngine {
+    let path = compiled_path(Precision::F16);
+    Bundle::open(&path)
+        .and_then(|b| TractEngine::load_with(&b, half))
+        .unwrap_or_else(|e| panic!("{} ({half:?}): {e}", path.display()))
 }
 
 /// One golden safetensors file, owned.

@@ -31,7 +31,7 @@ use std::time::Instant;
 use super::archive::write_archive;
 use super::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision};
 use crate::engine::Stage;
-use crate::engine_tract::{check_graph_io, engine_error, nnef_model, onnx_model};
+use crate::engine_tract::{HalfArithmetic, check_graph_io, engine_error, nnef_model, onnx_model};
 use crate::error::InitError;
 use crate::regions::check_regions_with;
 
@@ -144,7 +144,14 @@ pub fn compile(
         .map_err(engine_err)?;
         let translate_ms = started.elapsed().as_secs_f64() * 1e3;
         // As the ECU engine will read it: tract-core's registry only, names and facts checked.
-        let back = nnef_model(stage, &core_only, &tar, entry, precision)?;
+        let (back, _) = nnef_model(
+            stage,
+            &core_only,
+            &tar,
+            entry,
+            precision,
+            HalfArithmetic::Widened,
+        )?;
         check_graph_io(stage, &back, &entry.inputs, &entry.outputs)?;
         stages.push(StageCompiled {
             stage,

@@ -3,14 +3,19 @@
 //! measured bounds of the committed f32 bundle, stage by stage over both golden frames, and in
 //! a fraction of its file size.
 //!
-//! Both are weight storage, f32 arithmetic: the f16 weights are widened at load on every target
-//! (tract's f16 kernels are not used for them), the int8 weights are dequantised per output
-//! channel. The deviation is the weights' rounding alone, so the bounds hold on every kernel
-//! family.
+//! The int8 bundle and the f16 bundle widened at load are weight storage, f32 arithmetic: the
+//! deviation is the weights' rounding alone, so their bounds hold on every kernel family. The
+//! f16 bundle in f16 arithmetic (the default on a core with FEAT_FP16, e.g. the emulated
+//! Cortex-A76; tract's portable f16 kernels where the core has none, as on x86 here) rounds every
+//! activation and partial sum to f16 as well: its bounds are measured on both kernel families.
 
-use satmap_ecu_tests::golden::{compiled_engine_as, compiled_path, max_abs_diff};
+use satmap_ecu_tests::golden::{
+    compiled_engine_as, compiled_f16_engine, compiled_path, max_abs_diff,
+};
 use satmap_ecu_tests::parity::stage_buffers;
+use satmap_runtime::Stage;
 use satmap_runtime::bundle::{Bundle, Precision};
+use satmap_runtime::engine_tract::{HalfArithmetic, TractEngine};
 
 /// Largest deviation of the f16 bundle from the f32 one per stage buffer, over both golden
 /// frames of the trained `test` weights: measured (2026-12-01) and doubled.
@@ -23,6 +28,20 @@ const F16_BOUNDS: [(&str, f32); 8] = [
     ("satellite_bev", 8.3e-3), // 4.13e-3
     ("class_logits", 0.19),    // 9.50e-2
     ("points", 0.048),         // 2.39e-2 (normalised to the BEV range)
+];
+
+/// The f16 bundle in f16 arithmetic (`bev_query` and `map_decoder` widened: index arithmetic), measured
+/// (2026-12-06) on tract's portable f16 kernels (x86, AMD EPYC) and on its NEON fp16 kernels
+/// (aarch64, qemu Cortex-A76), the larger of the two doubled.
+const F16_NATIVE_BOUNDS: [(&str, f32); 8] = [
+    ("value", 0.011),         // measured 5.37e-3 (x86)
+    ("bev_query", 0.11),      // 5.14e-2 (widened)
+    ("gkt_weights", 0.022),   // 1.10e-2 (widened)
+    ("gathered", 8.0e-3),     // 3.95e-3 (x86)
+    ("camera_bev", 0.16),     // 7.76e-2 (x86)
+    ("satellite_bev", 0.086), // 4.28e-2 (x86)
+    ("class_logits", 0.19),   // 9.14e-2 (x86)
+    ("points", 0.05),         // 2.48e-2 (x86, normalised to the BEV range)
 ];
 
 /// The same for the int8 bundle (int8 weights, one scale per output channel, f32 arithmetic):
@@ -41,7 +60,12 @@ const INT8_BOUNDS: [(&str, f32); 8] = [
 /// `precision`'s bundle: its manifest says so, its file is at most `max_size_share` of the f32
 /// one, and every stage buffer stays within `bounds` of the f32 bundle's (and moves: the
 /// rounding is real).
-fn steps_within_bounds_of_f32(precision: Precision, bounds: &[(&str, f32)], max_size_share: f64) {
+fn steps_within_bounds_of_f32(
+    precision: Precision,
+    engine: impl Fn() -> TractEngine,
+    bounds: &[(&str, f32)],
+    max_size_share: f64,
+) {
     let low = Bundle::open(compiled_path(precision)).unwrap();
     assert_eq!(low.manifest().precision, precision);
     let full = Bundle::open(compiled_path(Precision::F32)).unwrap();
@@ -54,7 +78,7 @@ fn steps_within_bounds_of_f32(precision: Precision, bounds: &[(&str, f32)], max_
         "{small} vs {big}"
     );
     let from_f32 = stage_buffers(|| compiled_engine_as(Precision::F32));
-    let from_low = stage_buffers(|| compiled_engine_as(precision));
+    let from_low = stage_buffers(engine);
     let mut moved = false;
     for ((name, got, _), (_, f32s, _)) in from_low.iter().zip(&from_f32) {
         let d = max_abs_diff(got, f32s);
@@ -74,14 +98,56 @@ fn steps_within_bounds_of_f32(precision: Precision, bounds: &[(&str, f32)], max_
     );
 }
 
-/// The f16 bundle, within [`F16_BOUNDS`], in under 60% of the f32 file.
+/// The f16 bundle widened to f32 arithmetic, within [`F16_BOUNDS`], in under 60% of the f32 file.
 #[test]
-fn the_f16_bundle_steps_within_its_bounds_of_f32() {
-    steps_within_bounds_of_f32(Precision::F16, &F16_BOUNDS, 0.6);
+fn the_f16_bundle_widened_steps_within_its_bounds_of_f32() {
+    let engine = || compiled_f16_engine(HalfArithmetic::Widened);
+    assert_eq!(
+        engine().half_arithmetic(Stage::ImageEncoder),
+        Some(HalfArithmetic::Widened)
+    );
+    steps_within_bounds_of_f32(Precision::F16, engine, &F16_BOUNDS, 0.6);
+}
+
+/// The f16 bundle in f16 arithmetic, within [`F16_NATIVE_BOUNDS`]: the encoders run in f16,
+/// `bev_query` and `map_decoder` widened (their index arithmetic: sampling locations).
+#[test]
+fn the_f16_bundle_in_f16_arithmetic_steps_within_its_bounds_of_f32() {
+    let engine = || compiled_f16_engine(HalfArithmetic::Native);
+    let loaded = engine();
+    for stage in Stage::ALL {
+        let want = if matches!(stage, Stage::BevQuery | Stage::MapDecoder) {
+            HalfArithmetic::Widened
+        } else {
+            HalfArithmetic::Native
+        };
+        assert_eq!(loaded.half_arithmetic(stage), Some(want), "{stage}");
+    }
+    drop(loaded);
+    steps_within_bounds_of_f32(Precision::F16, engine, &F16_NATIVE_BOUNDS, 0.6);
+}
+
+/// Opened without a choice, the f16 bundle runs in f16 where tract finds FEAT_FP16 on this core
+/// and widened elsewhere; the f32 bundle has no f16 arithmetic to report.
+#[test]
+fn the_f16_bundle_takes_the_arithmetic_of_this_core() {
+    let core = HalfArithmetic::of_this_core();
+    println!("this core: f16 arithmetic {}", core.name());
+    let f16 = compiled_engine_as(Precision::F16);
+    assert_eq!(f16.half_arithmetic(Stage::ImageEncoder), Some(core));
+    assert_eq!(
+        compiled_engine_as(Precision::F32).half_arithmetic(Stage::MapDecoder),
+        None
+    );
 }
 
 /// The int8 bundle, within [`INT8_BOUNDS`], in under 45% of the f32 file.
 #[test]
 fn the_int8_bundle_steps_within_its_bounds_of_f32() {
-    steps_within_bounds_of_f32(Precision::Int8, &INT8_BOUNDS, 0.45);
+    steps_within_bounds_of_f32(
+        Precision::Int8,
+        || compiled_engine_as(Precision::Int8),
+        &INT8_BOUNDS,
+        0.45,
+    );
 }
