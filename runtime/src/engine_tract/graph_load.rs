@@ -27,10 +27,11 @@ pub(crate) fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError +
 /// Where an f16 bundle's arithmetic runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum HalfArithmetic {
-    /// In f16, on a core with f16 arithmetic (Armv8.2-A FEAT_FP16: Cortex-A55/A75 and later,
+    /// In f16, for a core with f16 arithmetic (Armv8.2-A FEAT_FP16: Cortex-A55/A75 and later,
     /// every listed ECU application core but the A72): the stored graph runs as it is, with a
     /// cast at each float input and output, so the runtime's buffers stay f32. tract then picks
-    /// its fp16 kernels (twice the lanes of f32 per NEON instruction).
+    /// its fp16 kernels (twice the lanes of f32 per NEON instruction), yet retired more
+    /// instructions than f32 on `test`'s encoders (docs/perf.md, "On ARM").
     Native,
     /// Widened to f32 at load: f16-rounded weights, f32 arithmetic, f32 RAM (the widened
     /// constants fold into f32 ones when the plan is optimised). Where the core has no f16

@@ -264,10 +264,12 @@ impl core::fmt::Debug for TractEngine {
 }
 
 impl TractEngine {
-    /// Load, optimise and plan every stage of `bundle`; an f16 bundle in the arithmetic this
-    /// core has ([`HalfArithmetic::of_this_core`]).
+    /// Load, optimise and plan every stage of `bundle`; an f16 bundle widened to f32
+    /// arithmetic. Decided by count: on the `test` bundle under qemu's Cortex-A76, tract's f16
+    /// path retired 1.5-2x the instructions of the f32 one on the encoders (docs/perf.md, "On
+    /// ARM"), so f16 arithmetic is a choice ([`TractEngine::load_with`]), not the default.
     pub fn load(bundle: &Bundle) -> Result<Self, BundleError> {
-        Self::load_with(bundle, HalfArithmetic::of_this_core())
+        Self::load_with(bundle, HalfArithmetic::Widened)
     }
 
     /// [`TractEngine::load`] with an f16 bundle's arithmetic chosen by the caller (an f32 or
