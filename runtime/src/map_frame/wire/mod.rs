@@ -23,10 +23,12 @@
 
 use core::fmt;
 
-use crc::{CRC_32_AUTOSAR, Crc};
-use glam::Vec2;
+mod receive;
+pub use receive::{Checked, check, deserialise};
 
-use super::{Health, MapClass, MapElement, MapFrame, SatellitePrior};
+use crc::{CRC_32_AUTOSAR, Crc};
+
+use super::{Health, MapFrame, SatellitePrior};
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::{MAX_TOP_K, NUM_POINTS};
 use crate::frame::CameraState;
@@ -210,98 +212,6 @@ fn crc_of(frame: &[u8]) -> u32 {
     digest.finalize()
 }
 
-/// What a checked frame's header says.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Checked {
-    /// The E2E counter.
-    pub counter: u16,
-    /// The frame's sequence counter.
-    pub sequence: u64,
-}
-
-/// Check a received serialised frame: length, CRC, then data id.
-///
-/// # Errors
-/// [`WireError::Length`], [`WireError::Crc`] or [`WireError::DataId`].
-pub fn check(bytes: &[u8], data_id: u32) -> Result<Checked, WireError> {
-    let stated = bytes
-        .get(0..2)
-        .map_or(0, |b| usize::from(u16::from_le_bytes([b[0], b[1]])));
-    if bytes.len() < HEADER_BYTES || stated != bytes.len() {
-        return Err(WireError::Length {
-            stated,
-            got: bytes.len(),
-        });
-    }
-    let stated_crc = u32::from_le_bytes(le4(&bytes[8..12]));
-    let computed = crc_of(bytes);
-    if stated_crc != computed {
-        return Err(WireError::Crc {
-            stated: stated_crc,
-            computed,
-        });
-    }
-    let got = u32::from_le_bytes(le4(&bytes[4..8]));
-    if got != data_id {
-        return Err(WireError::DataId {
-            expected: data_id,
-            got,
-        });
-    }
-    Ok(Checked {
-        counter: u16::from_le_bytes([bytes[2], bytes[3]]),
-        sequence: u64::from_le_bytes(le8(&bytes[12..20])),
-    })
-}
-
-/// [`check`], then parse the frame back.
-///
-/// # Errors
-/// As [`check`], and [`WireError::Field`] for an element count that disagrees with the length
-/// or a class / health value out of range.
-pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
-    let checked = check(bytes, data_id)?;
-    let n = usize::from(bytes[42]);
-    if n > MAX_TOP_K || bytes.len() != HEADER_BYTES + n * ELEMENT_BYTES {
-        return Err(WireError::Field { offset: 42 });
-    }
-    let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
-    let health = health_from_word(u32::from_le_bytes(le4(&bytes[36..40])), covered)
-        .ok_or(WireError::Field { offset: 36 })?;
-    let mut frame = MapFrame {
-        sequence: checked.sequence,
-        timestamp_us: u64::from_le_bytes(le8(&bytes[20..28])),
-        elements: heapless::Vec::new(),
-        health,
-        digest: u64::from_le_bytes(le8(&bytes[28..36])),
-        e2e_counter: checked.counter,
-    };
-    for (k, b) in bytes[HEADER_BYTES..]
-        .chunks_exact(ELEMENT_BYTES)
-        .enumerate()
-    {
-        let class = MapClass::from_label(usize::from(b[0])).ok_or(WireError::Field {
-            offset: HEADER_BYTES + k * ELEMENT_BYTES,
-        })?;
-        let mut points_m = [Vec2::ZERO; NUM_POINTS];
-        for (p, pb) in points_m.iter_mut().zip(b[8..].chunks_exact(8)) {
-            *p = Vec2::new(
-                f32::from_bits(u32::from_le_bytes(le4(&pb[0..4]))),
-                f32::from_bits(u32::from_le_bytes(le4(&pb[4..8]))),
-            );
-        }
-        let element = MapElement {
-            class,
-            score: f32::from_bits(u32::from_le_bytes(le4(&b[4..8]))),
-            instance: u16::from_le_bytes([b[2], b[3]]),
-            points_m,
-        };
-        // n <= MAX_TOP_K, checked above.
-        let _ = frame.elements.push(element);
-    }
-    Ok(frame)
-}
-
 fn le4(b: &[u8]) -> [u8; 4] {
     let mut a = [0; 4];
     a.copy_from_slice(&b[..4]);
@@ -318,101 +228,4 @@ const _: () = assert!(MAX_WIRE_BYTES <= u16::MAX as usize);
 const _: () = assert!(NUM_CAMERAS * 2 <= 12);
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::map_frame::digest;
-
-    pub(crate) fn sample() -> MapFrame {
-        let mut f = MapFrame {
-            sequence: 0x0102_0304_0506_0708,
-            timestamp_us: 42_000_000,
-            e2e_counter: 65535,
-            health: Health {
-                satellite: SatellitePrior::Partial {
-                    covered_permille: 731,
-                },
-                degraded: false,
-                deadline_overrun: true,
-                cameras: [
-                    CameraState::Used,
-                    CameraState::Missing,
-                    CameraState::Used,
-                    CameraState::Stale,
-                    CameraState::Invalid,
-                    CameraState::Used,
-                ],
-            },
-            ..MapFrame::default()
-        };
-        for k in 0..3u16 {
-            let _ = f.elements.push(MapElement {
-                class: MapClass::from_label(usize::from(k)).unwrap_or(MapClass::Divider),
-                score: 0.9 - f32::from(k) * 0.1,
-                instance: 7 * k,
-                points_m: core::array::from_fn(|i| Vec2::new(i as f32 * 0.5, -(k as f32))),
-            });
-        }
-        f.digest = digest(&f.elements);
-        f
-    }
-
-    #[test]
-    fn round_trip_and_documented_offsets() {
-        let f = sample();
-        let mut buf = [0u8; MAX_WIRE_BYTES];
-        let n = serialise(&f, DEFAULT_DATA_ID, &mut buf).unwrap();
-        assert_eq!(n, HEADER_BYTES + 3 * ELEMENT_BYTES);
-        let bytes = &buf[..n];
-        assert_eq!(u16::from_le_bytes([bytes[0], bytes[1]]) as usize, n);
-        assert_eq!(u16::from_le_bytes([bytes[2], bytes[3]]), 65535);
-        assert_eq!(&bytes[4..8], &DEFAULT_DATA_ID.to_le_bytes());
-        assert_eq!(&bytes[12..20], &f.sequence.to_le_bytes());
-        // Camera states 0,1,0,2,3,0 -> bits; partial prior (1 << 12); overrun (1 << 16).
-        let word = 1 << 2 | 2 << 6 | 3 << 8 | 1 << 12 | 1 << 16;
-        assert_eq!(&bytes[36..40], &(word as u32).to_le_bytes());
-        assert_eq!(&bytes[40..42], &731u16.to_le_bytes());
-        assert_eq!(bytes[42], 3);
-        // The CRC is CRC-32/AUTOSAR of everything but itself (check value of the catalogue).
-        assert_eq!(CRC32.checksum(b"123456789"), 0x1697_D06A);
-        assert_eq!(deserialise(bytes, DEFAULT_DATA_ID), Ok(f));
-        assert!(matches!(
-            deserialise(bytes, DEFAULT_DATA_ID + 1),
-            Err(WireError::DataId { .. })
-        ));
-        assert!(matches!(
-            serialise(&sample(), DEFAULT_DATA_ID, &mut buf[..n - 1]),
-            Err(WireError::BufferTooSmall { .. })
-        ));
-    }
-
-    #[test]
-    fn every_single_bit_flip_fails_the_check() {
-        let mut buf = [0u8; MAX_WIRE_BYTES];
-        let n = serialise(&sample(), DEFAULT_DATA_ID, &mut buf).unwrap();
-        let good = buf;
-        let mut flips = 0;
-        for bit in 0..n * 8 {
-            let mut bad = good;
-            bad[bit / 8] ^= 1 << (bit % 8);
-            assert!(
-                check(&bad[..n], DEFAULT_DATA_ID).is_err(),
-                "flip of bit {bit} passed the check"
-            );
-            flips += 1;
-        }
-        assert_eq!(flips, n * 8);
-        // Truncated and extended frames fail on the length.
-        assert!(matches!(
-            check(&good[..n - 1], DEFAULT_DATA_ID),
-            Err(WireError::Length { .. })
-        ));
-        assert!(matches!(
-            check(&good[..n + 1], DEFAULT_DATA_ID),
-            Err(WireError::Length { .. })
-        ));
-        assert!(matches!(
-            check(&[], DEFAULT_DATA_ID),
-            Err(WireError::Length { .. })
-        ));
-    }
-}
+mod tests;
