@@ -138,6 +138,25 @@ fn staged_steps_equal_one_call_steps_over_a_replay() {
     }
 }
 
+/// A length no map frame has (up to `SIZE_MAX`) is refused before anything is read.
+#[test]
+fn a_map_frame_length_beyond_the_largest_is_refused_unread() {
+    let buf = [0u8; 64];
+    for len in [wire::MAX_WIRE_BYTES + 1, usize::MAX / 2, usize::MAX] {
+        // SAFETY: the check refuses these lengths before it makes a slice of `buf`.
+        let status = unsafe {
+            satmap_capi::satmap_check_map_frame(
+                buf.as_ptr(),
+                len,
+                SATMAP_DEFAULT_DATA_ID,
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+            )
+        };
+        assert_eq!(status, SatmapStatus::WireInvalid, "length {len}");
+    }
+}
+
 fn c_frame(g: &GoldenFrame, s: Step) -> SatmapFrame {
     let per = g.images.len() / 6;
     let ts = timestamp_us(s.sequence);

@@ -242,8 +242,11 @@ enum SatmapStatus satmap_map_frame(const struct SatmapRuntime *rt,
                                    size_t cap,
                                    size_t *written);
 
-// Check a received serialised map frame (length, CRC-32/AUTOSAR, data id); on success
-// `*sequence` and `*counter` (each may be NULL) receive the frame's sequence and E2E counter.
+// Check a received serialised map frame (length, CRC-32/AUTOSAR, data id, then every field:
+// element count against the length, reserved bytes, health codes, coverage, classes, scores
+// finite in [0, 1], finite points); on success `*sequence` and `*counter` (each may be NULL)
+// receive the frame's sequence and E2E counter. A frame that passes can be read by its element
+// count without reading past `len`. A `len` above the largest map frame is refused unread.
 //
 // # Safety
 // `bytes` valid for `len` bytes; `sequence` and `counter` NULL or valid for a write.

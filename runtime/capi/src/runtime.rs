@@ -395,8 +395,11 @@ pub unsafe extern "C" fn satmap_map_frame(
     })
 }
 
-/// Check a received serialised map frame (length, CRC-32/AUTOSAR, data id); on success
-/// `*sequence` and `*counter` (each may be NULL) receive the frame's sequence and E2E counter.
+/// Check a received serialised map frame (length, CRC-32/AUTOSAR, data id, then every field:
+/// element count against the length, reserved bytes, health codes, coverage, classes, scores
+/// finite in [0, 1], finite points); on success `*sequence` and `*counter` (each may be NULL)
+/// receive the frame's sequence and E2E counter. A frame that passes can be read by its element
+/// count without reading past `len`. A `len` above the largest map frame is refused unread.
 ///
 /// # Safety
 /// `bytes` valid for `len` bytes; `sequence` and `counter` NULL or valid for a write.
@@ -412,7 +415,12 @@ pub unsafe extern "C" fn satmap_check_map_frame(
         if bytes.is_null() {
             return SatmapStatus::NullArgument;
         }
-        // SAFETY: `len` readable bytes, per the contract.
+        // No map frame is longer: refused before a slice is made of a length no buffer has
+        // (`SIZE_MAX` would break the slice's own contract).
+        if len > wire::MAX_WIRE_BYTES {
+            return SatmapStatus::WireInvalid;
+        }
+        // SAFETY: `len` readable bytes, per the contract, and at most MAX_WIRE_BYTES.
         let frame = unsafe { core::slice::from_raw_parts(bytes, len) };
         match wire::check(frame, data_id) {
             Ok(c) => {

@@ -77,12 +77,48 @@ pub enum WireError {
         /// Data id received.
         got: u32,
     },
-    /// A field outside its range (element count, class, health bits): a sender bug, since the
-    /// CRC matched.
+    /// A field outside its range: a sender bug or a forgery, since the CRC matched.
     Field {
         /// Byte offset of the field.
         offset: usize,
+        /// Which rule it breaks.
+        rule: FieldRule,
     },
+}
+
+/// The content rules a received frame must keep (module doc), beyond its length and CRC.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldRule {
+    /// The element count is above `MAX_TOP_K` or disagrees with the frame's length.
+    ElementCount,
+    /// A reserved byte or bit is not 0.
+    Reserved,
+    /// A camera state or satellite prior code that does not exist.
+    Health,
+    /// `covered_permille` above 1000, or not 0 while the prior is not partial.
+    Coverage,
+    /// An element class that does not exist.
+    Class,
+    /// A score that is not a finite value in [0, 1].
+    Score,
+    /// A point coordinate that is not finite.
+    Point,
+}
+
+impl FieldRule {
+    /// What the rule asks, for messages.
+    #[must_use]
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Self::ElementCount => "element count above the maximum or not the frame's length",
+            Self::Reserved => "reserved bits not 0",
+            Self::Health => "no such camera state or satellite prior",
+            Self::Coverage => "coverage above 1000 per mille, or set without a partial prior",
+            Self::Class => "no such element class",
+            Self::Score => "score not finite in [0, 1]",
+            Self::Point => "point coordinate not finite",
+        }
+    }
 }
 
 impl fmt::Display for WireError {
@@ -104,7 +140,9 @@ impl fmt::Display for WireError {
                     "map frame data id {got:#010x}, expected {expected:#010x}"
                 )
             }
-            Self::Field { offset } => write!(f, "map frame field at byte {offset} out of range"),
+            Self::Field { offset, rule } => {
+                write!(f, "map frame field at byte {offset}: {}", rule.describe())
+            }
         }
     }
 }

@@ -3,7 +3,9 @@
 
 use glam::Vec2;
 
-use super::{ELEMENT_BYTES, HEADER_BYTES, WireError, crc_of, health_from_word, le4, le8};
+use super::{
+    ELEMENT_BYTES, FieldRule, HEADER_BYTES, WireError, crc_of, health_from_word, le4, le8,
+};
 use crate::capacity::{MAX_TOP_K, NUM_POINTS};
 use crate::map_frame::{MapClass, MapElement, MapFrame};
 
@@ -16,10 +18,14 @@ pub struct Checked {
     pub sequence: u64,
 }
 
-/// Check a received serialised frame: length, CRC, then data id.
+/// Check a received serialised frame: length, CRC, data id, then every field's content (the
+/// element count against the length, reserved bytes and bits, health codes, coverage, classes,
+/// finite scores in [0, 1] and finite points), so that a receiver may trust what it reads: a
+/// frame whose CRC a sender computed over a wrong count passes no further.
 ///
 /// # Errors
-/// [`WireError::Length`], [`WireError::Crc`] or [`WireError::DataId`].
+/// [`WireError::Length`], [`WireError::Crc`], [`WireError::DataId`] or [`WireError::Field`]
+/// with the first field (by offset) that breaks its rule.
 pub fn check(bytes: &[u8], data_id: u32) -> Result<Checked, WireError> {
     let stated = bytes
         .get(0..2)
@@ -45,6 +51,7 @@ pub fn check(bytes: &[u8], data_id: u32) -> Result<Checked, WireError> {
             got,
         });
     }
+    check_fields(bytes)?;
     Ok(Checked {
         counter: u16::from_le_bytes([bytes[2], bytes[3]]),
         sequence: u64::from_le_bytes(le8(&bytes[12..20])),
@@ -54,17 +61,17 @@ pub fn check(bytes: &[u8], data_id: u32) -> Result<Checked, WireError> {
 /// [`check`], then parse the frame back.
 ///
 /// # Errors
-/// As [`check`], and [`WireError::Field`] for an element count that disagrees with the length
-/// or a class / health value out of range.
+/// As [`check`].
 pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
     let checked = check(bytes, data_id)?;
-    let n = usize::from(bytes[42]);
-    if n > MAX_TOP_K || bytes.len() != HEADER_BYTES + n * ELEMENT_BYTES {
-        return Err(WireError::Field { offset: 42 });
-    }
     let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
-    let health = health_from_word(u32::from_le_bytes(le4(&bytes[36..40])), covered)
-        .ok_or(WireError::Field { offset: 36 })?;
+    // `check` has refused every health word `health_from_word` cannot read.
+    let health = health_from_word(u32::from_le_bytes(le4(&bytes[36..40])), covered).ok_or(
+        WireError::Field {
+            offset: 36,
+            rule: FieldRule::Health,
+        },
+    )?;
     let mut frame = MapFrame {
         sequence: checked.sequence,
         timestamp_us: u64::from_le_bytes(le8(&bytes[20..28])),
@@ -79,6 +86,7 @@ pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
     {
         let class = MapClass::from_label(usize::from(b[0])).ok_or(WireError::Field {
             offset: HEADER_BYTES + k * ELEMENT_BYTES,
+            rule: FieldRule::Class,
         })?;
         let mut points_m = [Vec2::ZERO; NUM_POINTS];
         for (p, pb) in points_m.iter_mut().zip(b[8..].chunks_exact(8)) {
@@ -93,8 +101,55 @@ pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
             instance: u16::from_le_bytes([b[2], b[3]]),
             points_m,
         };
-        // n <= MAX_TOP_K, checked above.
+        // At most MAX_TOP_K elements: `check` compared the count and the length.
         let _ = frame.elements.push(element);
     }
     Ok(frame)
+}
+
+/// The content rules of [`check`], on a frame whose length and CRC are already checked.
+fn check_fields(bytes: &[u8]) -> Result<(), WireError> {
+    let field = |offset, rule| Err(WireError::Field { offset, rule });
+    let word = u32::from_le_bytes(le4(&bytes[36..40]));
+    if word >> 17 != 0 {
+        return field(36, FieldRule::Reserved);
+    }
+    let prior = (word >> 12) & 0b111;
+    if prior > 3 {
+        return field(36, FieldRule::Health);
+    }
+    let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
+    if covered > 1000 || (prior != 1 && covered != 0) {
+        return field(40, FieldRule::Coverage);
+    }
+    let n = usize::from(bytes[42]);
+    if n > MAX_TOP_K || bytes.len() != HEADER_BYTES + n * ELEMENT_BYTES {
+        return field(42, FieldRule::ElementCount);
+    }
+    if bytes[43] != 0 {
+        return field(43, FieldRule::Reserved);
+    }
+    for (k, b) in bytes[HEADER_BYTES..]
+        .chunks_exact(ELEMENT_BYTES)
+        .enumerate()
+    {
+        let at = HEADER_BYTES + k * ELEMENT_BYTES;
+        if MapClass::from_label(usize::from(b[0])).is_none() {
+            return field(at, FieldRule::Class);
+        }
+        if b[1] != 0 {
+            return field(at + 1, FieldRule::Reserved);
+        }
+        let score = f32::from_bits(u32::from_le_bytes(le4(&b[4..8])));
+        if !(0.0..=1.0).contains(&score) {
+            return field(at + 4, FieldRule::Score);
+        }
+        if let Some(i) = b[8..]
+            .chunks_exact(4)
+            .position(|c| !f32::from_bits(u32::from_le_bytes(le4(c))).is_finite())
+        {
+            return field(at + 8 + 4 * i, FieldRule::Point);
+        }
+    }
+    Ok(())
 }
