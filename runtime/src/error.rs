@@ -4,10 +4,10 @@
 use core::fmt;
 
 use crate::calibration::{CalibrationFault, NUM_CAMERAS};
-use crate::engine::{EngineError, Stage};
+use crate::engine::EngineError;
 use crate::frame::{Axis, CameraState};
 use crate::gkt::KernelError;
-use crate::step::StepSlice;
+use crate::step::{FramePart, StepSlice};
 
 /// Why the runtime could not be created or recalibrated.
 ///
@@ -250,10 +250,19 @@ pub enum StepError {
     Engine(EngineError),
     /// The gather-sum kernel rejected a buffer (an internal sizing bug).
     Kernel(KernelError),
-    /// A stage produced NaN or infinite values.
+    /// A slice produced NaN or infinite values (checked after every stage and the gather-sum,
+    /// so bad data never reaches a published map).
     NonFiniteOutput {
-        /// The stage.
-        stage: Stage,
+        /// The slice whose output is not finite.
+        slice: StepSlice,
+    },
+    /// `step_run_next` was given the frame `step_begin` checked, but part of its content has
+    /// changed since (the staged step goes on; give it the checked content).
+    FrameChanged {
+        /// Sequence counter of the frame being stepped.
+        sequence: u64,
+        /// What differs.
+        part: FramePart,
     },
 }
 
@@ -366,9 +375,13 @@ impl fmt::Display for StepError {
             ),
             Self::Engine(e) => write!(f, "{e}"),
             Self::Kernel(e) => write!(f, "{e}"),
-            Self::NonFiniteOutput { stage } => {
-                write!(f, "stage {stage} produced non-finite values")
+            Self::NonFiniteOutput { slice } => {
+                write!(f, "slice {slice:?} produced non-finite values")
             }
+            Self::FrameChanged { sequence, part } => write!(
+                f,
+                "staged step of frame {sequence}: {part:?} differs from what step_begin checked"
+            ),
         }
     }
 }

@@ -49,7 +49,8 @@ typedef enum SatmapStatus {
   SATMAP_STATUS_NO_STEP_IN_PROGRESS = 11,
   // `satmap_step_finish` before every slice ran.
   SATMAP_STATUS_STEP_INCOMPLETE = 12,
-  // `satmap_step_run_next` given another frame than `satmap_step_begin`.
+  // `satmap_step_run_next` given another frame than `satmap_step_begin`, or one whose pose,
+  // motion or image bytes changed since (the staged step goes on).
   SATMAP_STATUS_FRAME_MISMATCH = 13,
   // A graph stage failed.
   SATMAP_STATUS_ENGINE = 14,

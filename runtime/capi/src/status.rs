@@ -33,7 +33,8 @@ pub enum SatmapStatus {
     NoStepInProgress = 11,
     /// `satmap_step_finish` before every slice ran.
     StepIncomplete = 12,
-    /// `satmap_step_run_next` given another frame than `satmap_step_begin`.
+    /// `satmap_step_run_next` given another frame than `satmap_step_begin`, or one whose pose,
+    /// motion or image bytes changed since (the staged step goes on).
     FrameMismatch = 13,
     /// A graph stage failed.
     Engine = 14,
@@ -70,7 +71,7 @@ impl From<&StepError> for SatmapStatus {
             StepError::StepInProgress { .. } => Self::StepInProgress,
             StepError::NoStepInProgress => Self::NoStepInProgress,
             StepError::StepIncomplete { .. } => Self::StepIncomplete,
-            StepError::FrameMismatch { .. } => Self::FrameMismatch,
+            StepError::FrameMismatch { .. } | StepError::FrameChanged { .. } => Self::FrameMismatch,
             StepError::Engine(_) | StepError::Kernel(_) => Self::Engine,
             StepError::NonFiniteOutput { .. } => Self::NonFiniteOutput,
             _ => Self::FrameRejected,

@@ -18,14 +18,14 @@ mod buffers;
 mod staged;
 
 pub use buffers::StepBuffers;
-use staged::Pending;
-pub use staged::{SliceDone, StepSlice};
+pub use staged::{FramePart, SliceDone, StepSlice};
+use staged::{ImageSeen, Pending};
 
 use crate::calibration::Calibration;
 use crate::can_bus::can_bus;
 use crate::capacity::CAN_BUS_LEN;
 use crate::decode::decode;
-use crate::engine::{Engine, Stage};
+use crate::engine::Engine;
 use crate::error::{InitError, StepError};
 use crate::frame::{Frame, FrameLimits, LastStep, check_frame};
 use crate::gkt::{Lut, gather_sum};
@@ -153,10 +153,18 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
             });
         }
         let cameras = check_frame(frame, &self.dims, &self.limits, self.last)?;
+        let images = core::array::from_fn(|c| {
+            frame.images[c]
+                .as_ref()
+                .filter(|_| cameras.mask.contains(c))
+                .map(ImageSeen::of)
+        });
         self.pending = Some(Pending {
             sequence: frame.sequence,
             timestamp_us: frame.timestamp_us,
             pose: frame.pose,
+            motion: frame.motion,
+            images,
             cameras,
             slot: 0,
             prior: SatellitePrior::Missing,
@@ -166,11 +174,14 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     }
 
     /// Run the next slice of the staged step. `frame` must be the frame given to
-    /// [`SatMap::step_begin`] (same sequence and timestamp, images still valid).
+    /// [`SatMap::step_begin`]: the same sequence and timestamp, and what the slice reads the
+    /// same as what `step_begin` checked (pose and motion for `bev_query`, the camera's image
+    /// bytes, size and stamp for its `image_encoder`: hashed at begin, hashed again here).
     ///
     /// # Errors
-    /// [`StepError::NoStepInProgress`], [`StepError::FrameMismatch`] (the staged step goes
-    /// on), or the slice's own error, which ends the staged step.
+    /// [`StepError::NoStepInProgress`], [`StepError::FrameMismatch`] or
+    /// [`StepError::FrameChanged`] (the staged step goes on), or the slice's own error, which
+    /// ends the staged step.
     pub fn step_run_next(&mut self, frame: &Frame<'_>) -> Result<SliceDone, StepError> {
         let Some(mut p) = self.pending else {
             return Err(StepError::NoStepInProgress);
@@ -188,6 +199,12 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                 remaining: 0,
             });
         };
+        if let Some(part) = changed_part(slice, frame, &p) {
+            return Err(StepError::FrameChanged {
+                sequence: p.sequence,
+                part,
+            });
+        }
         match self.run_slice(slice, frame, &mut p) {
             Ok(()) => {
                 p.slot = slot + 1;
@@ -261,6 +278,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                 b.can_bus = can_bus(&frame.pose, &frame.motion);
                 self.engine
                     .bev_query(&b.can_bus, &mut b.query, &mut b.weights)?;
+                finite(slice, &[&b.query, &b.weights])?;
             }
             StepSlice::ImageEncoder { camera } => {
                 let camera = usize::from(camera);
@@ -276,6 +294,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                     });
                 };
                 self.engine.encode_image(camera, image.rgb, value)?;
+                finite(slice, &[value])?;
             }
             StepSlice::GktGather => {
                 gather_sum(
@@ -285,10 +304,12 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                     &mut b.gathered,
                     p.cameras.mask,
                 )?;
+                finite(slice, &[&b.gathered])?;
             }
             StepSlice::BevEncoder => {
                 self.engine
                     .bev_encode(&b.query, &b.gathered, &mut b.camera_bev)?;
+                finite(slice, &[&b.camera_bev])?;
             }
             StepSlice::Satellite => {
                 let spec = self.dims.crop_spec();
@@ -306,6 +327,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                 } else {
                     self.engine
                         .encode_satellite(&b.crop, &mut b.satellite_bev)?;
+                    finite(slice, &[&b.satellite_bev])?;
                 }
                 (p.prior, p.degraded) = (prior, degraded);
             }
@@ -322,9 +344,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                 if !(b.logits.iter().all(|v| v.is_finite())
                     && b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT))
                 {
-                    return Err(StepError::NonFiniteOutput {
-                        stage: Stage::MapDecoder,
-                    });
+                    return Err(StepError::NonFiniteOutput { slice });
                 }
             }
         }
@@ -485,6 +505,35 @@ fn checked_dims<E: Engine>(engine: &E, limits: &FrameLimits) -> Result<ModelDims
 }
 
 #[cfg(test)]
+mod changed_frame_tests;
+#[cfg(test)]
 mod hardening_tests;
 #[cfg(test)]
 mod tests;
+
+/// Every value of `outputs` finite, or the slice's [`StepError::NonFiniteOutput`]: one counted
+/// pass over what the slice wrote (a bad input such as a finite 1e38 velocity otherwise turns
+/// the BEV non-finite and still decodes to a map marked healthy).
+fn finite(slice: StepSlice, outputs: &[&[f32]]) -> Result<(), StepError> {
+    if outputs.iter().all(|o| o.iter().all(|v| v.is_finite())) {
+        Ok(())
+    } else {
+        Err(StepError::NonFiniteOutput { slice })
+    }
+}
+
+/// The part of `frame` that `slice` reads and that differs from what `step_begin` checked.
+fn changed_part(slice: StepSlice, frame: &Frame<'_>, p: &Pending) -> Option<FramePart> {
+    match slice {
+        StepSlice::BevQuery => {
+            (frame.pose != p.pose || frame.motion != p.motion).then_some(FramePart::Motion)
+        }
+        StepSlice::ImageEncoder { camera } => {
+            let c = usize::from(camera);
+            let now = frame.images.get(c).copied().flatten();
+            (now.as_ref().map(ImageSeen::of) != p.images.get(c).copied().flatten())
+                .then_some(FramePart::Image { camera })
+        }
+        _ => None,
+    }
+}

@@ -18,9 +18,9 @@
 //! [`StepError::StepInProgress`]: crate::StepError::StepInProgress
 
 use crate::calibration::NUM_CAMERAS;
-use crate::frame::CameraUse;
+use crate::frame::{CameraImage, CameraUse};
 use crate::map_frame::SatellitePrior;
-use crate::pose::EgoPose;
+use crate::pose::{EgoMotion, EgoPose};
 
 /// One slice of a staged step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -94,12 +94,48 @@ impl SliceDone {
     }
 }
 
+/// The part of a frame a slice reads that differs from what `step_begin` checked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FramePart {
+    /// Pose or motion (read by the `bev_query` slice's CAN-bus vector).
+    Motion,
+    /// A camera's image bytes, size or stamp (read by its `image_encoder` slice).
+    Image {
+        /// Camera index (model order).
+        camera: u8,
+    },
+}
+
+/// What `step_begin` saw of one camera's image: a slice that reads it again must find the same.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct ImageSeen {
+    width_px: u32,
+    height_px: u32,
+    capture_us: u64,
+    /// xxh3-64 of the RGB bytes.
+    rgb_hash: u64,
+}
+
+impl ImageSeen {
+    pub(super) fn of(image: &CameraImage<'_>) -> Self {
+        Self {
+            width_px: image.width_px,
+            height_px: image.height_px,
+            capture_us: image.capture_us,
+            rgb_hash: xxhash_rust::xxh3::xxh3_64(image.rgb),
+        }
+    }
+}
+
 /// The staged step in progress: what `step_begin` checked and how far it got.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Pending {
     pub(super) sequence: u64,
     pub(super) timestamp_us: u64,
     pub(super) pose: EgoPose,
+    pub(super) motion: EgoMotion,
+    /// The images of the cameras that take part, as checked.
+    pub(super) images: [Option<ImageSeen>; NUM_CAMERAS],
     pub(super) cameras: CameraUse,
     /// Next slot of the fixed sequence (skipping left-out cameras).
     pub(super) slot: usize,

@@ -5,7 +5,7 @@
 use alloc::vec::Vec;
 
 use super::*;
-use crate::engine::{EngineError, EngineErrorKind};
+use crate::engine::{EngineError, EngineErrorKind, Stage};
 use crate::frame::CameraImage;
 use crate::pose::EgoPose;
 use crate::satellite::{CropSpec, FixedCrop, NoSatellite};
@@ -240,7 +240,7 @@ fn engine_failure_and_nan_output_leave_state_untouched() {
     assert_eq!(
         rt.step(&images.frame(1)).unwrap_err(),
         StepError::NonFiniteOutput {
-            stage: Stage::MapDecoder
+            slice: StepSlice::MapDecoder
         }
     );
     assert!(rt.last_map().is_none());
@@ -261,7 +261,7 @@ fn a_huge_finite_point_is_refused_as_non_finite_output() {
     assert_eq!(
         rt.step(&images.frame(2)).unwrap_err(),
         StepError::NonFiniteOutput {
-            stage: Stage::MapDecoder
+            slice: StepSlice::MapDecoder
         }
     );
     assert_eq!(rt.last_map(), Some(&first));

@@ -3,6 +3,7 @@
 //! `make test-aarch64`, from the same source. Each names the kernel family it ran on, so a log
 //! says which bits were proven where.
 
+mod bad_data;
 mod determinism;
 mod dropout;
 mod lut_kernel;
