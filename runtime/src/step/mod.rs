@@ -4,9 +4,9 @@
 //!
 //! Step order: frame checks -> CAN-bus vector -> `bev_query` -> one `image_encoder` run per
 //! camera that takes part (see [`crate::frame::CameraState`]) -> gather-sum over those cameras -> `bev_encoder` -> satellite crop (source) -> `satellite_encoder`, or zeros when
-//! the prior is missing or corrupt (degraded) -> `map_decoder` -> finiteness check (normalised
-//! points also within [`MAX_NORMALISED_POINT`]) -> decode ->
-//! digest. Failure at any point returns a [`StepError`] and leaves the last published map, the
+//! the prior is missing or corrupt (degraded) -> `map_decoder` -> decode -> digest. Every
+//! stage's output (and the gather-sum's) is checked finite as it is written, the decoder's
+//! normalised points also within [`MAX_NORMALISED_POINT`]. Failure at any point returns a [`StepError`] and leaves the last published map, the
 //! last sequence and timestamp untouched; intermediate buffers then hold the partial step.
 //! `step` allocates nothing. The same step can be run slice by slice (`step/staged.rs`).
 //!
