@@ -189,11 +189,9 @@ fn c_frame(g: &GoldenFrame, s: Step) -> SatmapFrame {
     }
 }
 
-#[test]
-fn the_c_api_computes_the_rust_run_and_protects_its_output() {
-    let sets = sets();
-    let rust = rust_run(&sets);
-    let c_regions: Vec<SatmapRegion> = (0..SATMAP_REGION_COUNT)
+/// Every caller region, sized and named as `satmap_region_info` says, each its own memory.
+fn c_regions() -> Vec<SatmapRegion> {
+    (0..SATMAP_REGION_COUNT)
         .map(|i| {
             let mut info = SatmapRegionInfo {
                 name: std::ptr::null(),
@@ -214,7 +212,76 @@ fn the_c_api_computes_the_rust_run_and_protects_its_output() {
                 len: r.len(),
             }
         })
+        .collect()
+}
+
+/// `satmap_create` on `regions` with the committed bundle and calibration.
+fn create(regions: &[SatmapRegion]) -> (SatmapStatus, *mut SatmapRuntime) {
+    let bundle = CString::new(root().join("models/bundles/test.satmap").to_str().unwrap()).unwrap();
+    let cal = root().join("models/calibration/nuscenes_like.toml");
+    let cal = CString::new(cal.to_str().unwrap()).unwrap();
+    let mut rt: *mut SatmapRuntime = std::ptr::null_mut();
+    // SAFETY: `regions.len()` entries; NUL-terminated paths; valid out pointer.
+    let status = unsafe {
+        satmap_capi::satmap_create(
+            regions.as_ptr(),
+            regions.len(),
+            bundle.as_ptr(),
+            cal.as_ptr(),
+            &mut rt,
+        )
+    };
+    (status, rt)
+}
+
+/// Regions that share bytes are refused before the runtime makes anything of them (the cases of
+/// issue 38: all ten on one buffer, `camera_bev` with `satellite_bev`, `class_logits` with
+/// `points`, `gkt_lut` inside `value_features`, and a region wrapping the address space); the
+/// same regions apart create a runtime.
+#[test]
+fn overlapping_caller_regions_are_refused_at_create() {
+    let apart = c_regions();
+    let id = |name: &str| REGIONS.iter().position(|r| r.name == name).unwrap();
+    let big = region(apart.iter().map(|r| r.len).max().unwrap());
+    let mut cases: Vec<(&str, Vec<SatmapRegion>)> = Vec::new();
+    let all_on_one = apart
+        .iter()
+        .map(|r| SatmapRegion {
+            data: big.as_mut_ptr(),
+            len: r.len,
+        })
         .collect();
+    cases.push(("all ten on one buffer", all_on_one));
+    for (a, b) in [
+        ("camera_bev", "satellite_bev"),
+        ("class_logits", "points"),
+        ("gkt_lut", "value_features"),
+    ] {
+        let mut shared = apart.clone();
+        // `a` starts 64 bytes into `b`: a partial overlap.
+        // SAFETY: inside `b`'s region (every region is more than 64 bytes).
+        shared[id(a)].data = unsafe { apart[id(b)].data.add(64) };
+        cases.push((a, shared));
+    }
+    let mut wrapping = apart.clone();
+    wrapping[0].len = usize::MAX;
+    cases.push(("a region past the address space", wrapping));
+    for (what, regions) in &cases {
+        let (status, rt) = create(regions);
+        assert_eq!(status, SatmapStatus::RegionsOverlap, "{what}");
+        assert!(rt.is_null(), "{what}");
+    }
+    let (status, rt) = create(&apart);
+    assert_eq!(status, SatmapStatus::Ok);
+    // SAFETY: from satmap_create, destroyed once.
+    unsafe { satmap_capi::satmap_destroy(rt) };
+}
+
+#[test]
+fn the_c_api_computes_the_rust_run_and_protects_its_output() {
+    let sets = sets();
+    let rust = rust_run(&sets);
+    let c_regions = c_regions();
     // The compiled bundle, as an ECU loads it (and as `rust_run` does).
     let bundle = CString::new(root().join("models/bundles/test.satmap").to_str().unwrap()).unwrap();
     let cal = CString::new(

@@ -54,7 +54,7 @@ typedef enum SatmapStatus {
   SATMAP_STATUS_FRAME_MISMATCH = 13,
   // A graph stage failed.
   SATMAP_STATUS_ENGINE = 14,
-  // The decoder produced non-finite values; the map was not published.
+  // A stage (or the gather-sum) produced non-finite values; the map was not published.
   SATMAP_STATUS_NON_FINITE_OUTPUT = 15,
   // No map has been published yet.
   SATMAP_STATUS_NO_MAP_YET = 16,
@@ -66,6 +66,9 @@ typedef enum SatmapStatus {
   SATMAP_STATUS_WIRE_INVALID = 19,
   // A Rust panic was caught at the boundary (a runtime bug): destroy the runtime.
   SATMAP_STATUS_PANIC = 20,
+  // Two caller regions share bytes (or one wraps past the end of the address space); nothing
+  // was created. Each region must be its own memory.
+  SATMAP_STATUS_REGIONS_OVERLAP = 21,
 } SatmapStatus;
 
 // A slice of a staged step (`satmap_step_run_next`).
@@ -179,7 +182,8 @@ enum SatmapStatus satmap_region_info(size_t id, struct SatmapRegionInfo *info);
 // Create a runtime over the caller's regions: load and verify the bundle (a compiled `.satmap`
 // file; a folder of ONNX stages only where the library was built with the host's `onnx`
 // feature), read the calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
-// `SATMAP_REGION_COUNT` entries in region id order; each must stay valid and untouched until
+// `SATMAP_REGION_COUNT` entries in region id order, no two sharing a byte
+// (`SATMAP_STATUS_REGIONS_OVERLAP`); each must stay valid and untouched until
 // `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
 //
 // # Safety

@@ -106,6 +106,24 @@ pub unsafe extern "C" fn satmap_region_info(
     })
 }
 
+/// Whether any two regions share a byte, or one's end wraps past the address space. Empty
+/// regions share nothing (they are refused later as too small).
+fn regions_overlap(regions: &[SatmapRegion]) -> bool {
+    let mut spans = [(0usize, 0usize); SATMAP_REGION_COUNT];
+    for (span, r) in spans.iter_mut().zip(regions) {
+        let start = r.data as usize;
+        let Some(end) = start.checked_add(r.len) else {
+            return true;
+        };
+        *span = (start, end);
+    }
+    spans.iter().enumerate().any(|(i, &(a0, a1))| {
+        spans[i + 1..]
+            .iter()
+            .any(|&(b0, b1)| a0 < a1 && b0 < b1 && a0 < b1 && b0 < a1)
+    })
+}
+
 fn path_of<'a>(p: *const c_char) -> Result<&'a Path, SatmapStatus> {
     if p.is_null() {
         return Err(SatmapStatus::NullArgument);
@@ -120,7 +138,8 @@ fn path_of<'a>(p: *const c_char) -> Result<&'a Path, SatmapStatus> {
 /// Create a runtime over the caller's regions: load and verify the bundle (a compiled `.satmap`
 /// file; a folder of ONNX stages only where the library was built with the host's `onnx`
 /// feature), read the calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
-/// `SATMAP_REGION_COUNT` entries in region id order; each must stay valid and untouched until
+/// `SATMAP_REGION_COUNT` entries in region id order, no two sharing a byte
+/// (`SATMAP_STATUS_REGIONS_OVERLAP`); each must stay valid and untouched until
 /// `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
 ///
 /// # Safety
@@ -150,6 +169,11 @@ pub unsafe extern "C" fn satmap_create(
         let given = unsafe { core::slice::from_raw_parts(regions, region_count) };
         if given.iter().any(|r| r.data.is_null()) {
             return SatmapStatus::NullArgument;
+        }
+        // Before any slice is made of them: two overlapping regions would be two `&mut` to the
+        // same bytes (the runtime then computed a wrong map, or panicked, on every step).
+        if regions_overlap(given) {
+            return SatmapStatus::RegionsOverlap;
         }
         let (bundle, calibration) = match (path_of(bundle_path), path_of(calibration_toml)) {
             (Ok(b), Ok(c)) => (b, c),

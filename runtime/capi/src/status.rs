@@ -38,7 +38,7 @@ pub enum SatmapStatus {
     FrameMismatch = 13,
     /// A graph stage failed.
     Engine = 14,
-    /// The decoder produced non-finite values; the map was not published.
+    /// A stage (or the gather-sum) produced non-finite values; the map was not published.
     NonFiniteOutput = 15,
     /// No map has been published yet.
     NoMapYet = 16,
@@ -50,6 +50,9 @@ pub enum SatmapStatus {
     WireInvalid = 19,
     /// A Rust panic was caught at the boundary (a runtime bug): destroy the runtime.
     Panic = 20,
+    /// Two caller regions share bytes (or one wraps past the end of the address space); nothing
+    /// was created. Each region must be its own memory.
+    RegionsOverlap = 21,
 }
 
 impl From<&InitError> for SatmapStatus {
