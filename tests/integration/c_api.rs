@@ -215,7 +215,7 @@ fn c_regions() -> Vec<SatmapRegion> {
         .collect()
 }
 
-/// `satmap_create` on `regions` with the committed bundle and calibration.
+/// `satmap_create` on `regions` with the committed compiled bundle and calibration.
 fn create(regions: &[SatmapRegion]) -> (SatmapStatus, *mut SatmapRuntime) {
     let bundle = CString::new(root().join("models/bundles/test.satmap").to_str().unwrap()).unwrap();
     let cal = root().join("models/calibration/nuscenes_like.toml");
@@ -281,27 +281,8 @@ fn overlapping_caller_regions_are_refused_at_create() {
 fn the_c_api_computes_the_rust_run_and_protects_its_output() {
     let sets = sets();
     let rust = rust_run(&sets);
-    let c_regions = c_regions();
     // The compiled bundle, as an ECU loads it (and as `rust_run` does).
-    let bundle = CString::new(root().join("models/bundles/test.satmap").to_str().unwrap()).unwrap();
-    let cal = CString::new(
-        root()
-            .join("models/calibration/nuscenes_like.toml")
-            .to_str()
-            .unwrap(),
-    )
-    .unwrap();
-    let mut rt: *mut SatmapRuntime = std::ptr::null_mut();
-    // SAFETY: regions as the header states; NUL-terminated paths; valid out pointer.
-    let status = unsafe {
-        satmap_capi::satmap_create(
-            c_regions.as_ptr(),
-            c_regions.len(),
-            bundle.as_ptr(),
-            cal.as_ptr(),
-            &mut rt,
-        )
-    };
+    let (status, rt) = create(&c_regions());
     assert_eq!(status, SatmapStatus::Ok);
     let mut buf = vec![0u8; SATMAP_MAX_WIRE_BYTES];
     for (s, want) in STEPS.iter().zip(&rust) {
