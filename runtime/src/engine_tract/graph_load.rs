@@ -80,29 +80,25 @@ pub(crate) fn nnef_model(
     let engine_err = engine_error(stage);
     let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
     check_io_names(stage, &graph_io_names(&model)?, entry)?;
+    if precision != Precision::F16 {
+        return Ok((model, None));
+    }
     let (f16, f32) = (f16::datum_type(), f32::datum_type());
-    match (precision, half) {
-        (Precision::F16, HalfArithmetic::Widened) => FloatPrecisionTranslator::new(f16, f32)
-            .transform_into(model)
-            .map(|m| (m, Some(HalfArithmetic::Widened)))
-            .map_err(engine_err),
-        // A stage with index arithmetic runs widened whole (see `has_index_arithmetic`).
-        (Precision::F16, HalfArithmetic::Native) if has_index_arithmetic(&model) => {
-            FloatPrecisionTranslator::new(f16, f32)
-                .transform_into(model)
-                .map(|m| (m, Some(HalfArithmetic::Widened)))
-                .map_err(engine_err)
-        }
+    // A stage with index arithmetic runs widened whole (see `has_index_arithmetic`).
+    let got = match half {
+        HalfArithmetic::Native if !has_index_arithmetic(&model) => HalfArithmetic::Native,
+        _ => HalfArithmetic::Widened,
+    };
+    let translator = match got {
         // The translator always turns sources to f32 and casts the graph's outputs back to
         // f32; a filter that translates no other node keeps every operator in f16.
-        (Precision::F16, HalfArithmetic::Native) => {
-            FloatPrecisionTranslator::with_filter(f16, f32, |_| false)
-                .transform_into(model)
-                .map(|m| (m, Some(HalfArithmetic::Native)))
-                .map_err(engine_err)
-        }
-        (Precision::F32 | Precision::Int8, _) => Ok((model, None)),
-    }
+        HalfArithmetic::Native => FloatPrecisionTranslator::with_filter(f16, f32, |_| false),
+        HalfArithmetic::Widened => FloatPrecisionTranslator::new(f16, f32),
+    };
+    translator
+        .transform_into(model)
+        .map(|m| (m, Some(got)))
+        .map_err(engine_err)
 }
 
 /// Whether any operator of `model` turns a float into something else (a cast to an index, a
