@@ -7,7 +7,7 @@
 # Output (outside the repository, idempotent by stamp): $SATMAP_CROSS_ROOT/opt/qemu-plugins/
 #   bin/qemu-aarch64, lib/libinsn.so  (inside the chroot: /opt/qemu-plugins/...)
 #
-# A person's command (`make insn-counts` calls it), never a CI step: ~10 min on 2 cores, once.
+# A person's command (`make insn-counts` calls it), never a CI step: a few minutes on 2 cores (one user-mode target), once.
 set -euo pipefail
 
 ROOT=${SATMAP_CROSS_ROOT:-/var/cache/satmap-cross/trixie}
