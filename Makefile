@@ -190,6 +190,6 @@ test-targets: test-aarch64 test-baremetal
 
 # Instructions retired per stage on the application core (docs/perf.md, "On ARM"): our engine's
 # f32/f16/int8 bundles and onnxruntime's aarch64 wheel, under qemu-aarch64 rebuilt with TCG
-# plugins from Debian's qemu source (once, a few minutes). A person's command, not a CI step: ~15 min.
+# plugins from Debian's qemu source (once, a few minutes). A person's command, not a CI step: about half an hour (each stage emulated in two processes per column).
 insn-counts: cross-toolchain
 	SATMAP_ORT_COUNTS=1 bash targets/insn_counts.sh

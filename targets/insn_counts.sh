@@ -11,7 +11,7 @@
 #
 # Output: out/insn-counts.tsv (engine, precision, stage, instructions per run) and a Markdown table
 # on stdout. With SATMAP_ORT_COUNTS=1 it also counts onnxruntime's aarch64 wheel on the same
-# stages (targets/ort_insns.sh). A person's command (`make insn-counts`), ~15 min, not CI.
+# stages (targets/ort_insns.sh). A person's command (`make insn-counts`), about half an hour on 2 cores, not CI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 CROSS=targets/in-chroot.sh
