@@ -166,9 +166,24 @@ pub fn health_word(h: &Health) -> u32 {
     cameras | prior << 12 | u32::from(h.degraded) << 15 | u32::from(h.deadline_overrun) << 16
 }
 
-fn health_from_word(word: u32, covered_permille: u16) -> Option<Health> {
-    if word >> 17 != 0 || (word >> 12) & 0b111 > 3 {
-        return None;
+/// The health of a received frame from its word and `covered_permille`, under the content
+/// rules: no reserved bit set (bits 17 and up), a satellite prior code that exists, coverage at
+/// most 1000 and only with a partial prior.
+fn health_from_word(word: u32, covered_permille: u16) -> Result<Health, WireError> {
+    let field = |offset, rule| Err(WireError::Field { offset, rule });
+    if word >> 17 != 0 {
+        return field(36, FieldRule::Reserved);
+    }
+    let satellite = match (word >> 12) & 0b111 {
+        0 => SatellitePrior::Present,
+        1 => SatellitePrior::Partial { covered_permille },
+        2 => SatellitePrior::Missing,
+        3 => SatellitePrior::Corrupt,
+        _ => return field(36, FieldRule::Health),
+    };
+    let partial = matches!(satellite, SatellitePrior::Partial { .. });
+    if covered_permille > 1000 || (!partial && covered_permille != 0) {
+        return field(40, FieldRule::Coverage);
     }
     let camera = |c: usize| match (word >> (2 * c)) & 0b11 {
         0 => CameraState::Used,
@@ -176,13 +191,7 @@ fn health_from_word(word: u32, covered_permille: u16) -> Option<Health> {
         2 => CameraState::Stale,
         _ => CameraState::Invalid,
     };
-    let satellite = match (word >> 12) & 0b111 {
-        0 => SatellitePrior::Present,
-        1 => SatellitePrior::Partial { covered_permille },
-        2 => SatellitePrior::Missing,
-        _ => SatellitePrior::Corrupt,
-    };
-    Some(Health {
+    Ok(Health {
         satellite,
         degraded: word & (1 << 15) != 0,
         deadline_overrun: word & (1 << 16) != 0,

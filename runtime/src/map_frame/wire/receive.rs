@@ -7,7 +7,7 @@ use super::{
     ELEMENT_BYTES, FieldRule, HEADER_BYTES, WireError, crc_of, health_from_word, le4, le8,
 };
 use crate::capacity::{MAX_TOP_K, NUM_POINTS};
-use crate::map_frame::{MapClass, MapElement, MapFrame};
+use crate::map_frame::{Health, MapClass, MapElement, MapFrame};
 
 /// What a checked frame's header says.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -64,14 +64,7 @@ pub fn check(bytes: &[u8], data_id: u32) -> Result<Checked, WireError> {
 /// As [`check`].
 pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
     let checked = check(bytes, data_id)?;
-    let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
-    // `check` has refused every health word `health_from_word` cannot read.
-    let health = health_from_word(u32::from_le_bytes(le4(&bytes[36..40])), covered).ok_or(
-        WireError::Field {
-            offset: 36,
-            rule: FieldRule::Health,
-        },
-    )?;
+    let health = health_of(bytes)?;
     let mut frame = MapFrame {
         sequence: checked.sequence,
         timestamp_us: u64::from_le_bytes(le8(&bytes[20..28])),
@@ -110,18 +103,7 @@ pub fn deserialise(bytes: &[u8], data_id: u32) -> Result<MapFrame, WireError> {
 /// The content rules of [`check`], on a frame whose length and CRC are already checked.
 fn check_fields(bytes: &[u8]) -> Result<(), WireError> {
     let field = |offset, rule| Err(WireError::Field { offset, rule });
-    let word = u32::from_le_bytes(le4(&bytes[36..40]));
-    if word >> 17 != 0 {
-        return field(36, FieldRule::Reserved);
-    }
-    let prior = (word >> 12) & 0b111;
-    if prior > 3 {
-        return field(36, FieldRule::Health);
-    }
-    let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
-    if covered > 1000 || (prior != 1 && covered != 0) {
-        return field(40, FieldRule::Coverage);
-    }
+    health_of(bytes)?;
     let n = usize::from(bytes[42]);
     if n > MAX_TOP_K || bytes.len() != HEADER_BYTES + n * ELEMENT_BYTES {
         return field(42, FieldRule::ElementCount);
@@ -152,4 +134,10 @@ fn check_fields(bytes: &[u8]) -> Result<(), WireError> {
         }
     }
     Ok(())
+}
+
+/// The health word (bytes 36..40) and coverage (40..42) read under their rules.
+fn health_of(bytes: &[u8]) -> Result<Health, WireError> {
+    let covered = u16::from_le_bytes([bytes[40], bytes[41]]);
+    health_from_word(u32::from_le_bytes(le4(&bytes[36..40])), covered)
 }
