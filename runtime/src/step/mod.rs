@@ -19,7 +19,7 @@ mod staged;
 
 pub use buffers::StepBuffers;
 pub use staged::{FramePart, SliceDone, StepSlice};
-use staged::{ImageSeen, Pending};
+use staged::{ImageSeen, Pending, Slices};
 
 use crate::calibration::Calibration;
 use crate::can_bus::can_bus;
@@ -129,14 +129,17 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     }
 
     /// Run one step on `frame` and return the new map: [`SatMap::step_begin`], every
-    /// [`SatMap::step_run_next`], then [`SatMap::step_finish`].
+    /// [`SatMap::step_run_next`], then [`SatMap::step_finish`] (the same bits), without the
+    /// staged step's content check, which one borrowed frame cannot fail.
     ///
     /// # Errors
     /// An input check, an engine stage or a non-finite decoder output; see [`StepError`].
     /// The runtime stays usable: the next good frame steps normally.
     /// [`StepError::StepInProgress`] while a staged step is in progress.
     pub fn step(&mut self, frame: &Frame<'_>) -> Result<&MapFrame, StepError> {
-        self.step_begin(frame)?;
+        // One borrowed frame serves every slice: nothing of it can change between them, so its
+        // images are not hashed for the slices to compare.
+        self.begin(frame, Slices::OneCall)?;
         while self.step_run_next(frame)?.more() {}
         self.step_finish()
     }
@@ -147,24 +150,33 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// [`StepError::StepInProgress`] while another staged step is in progress (that step
     /// continues); else the frame checks' errors (no step is started then).
     pub fn step_begin(&mut self, frame: &Frame<'_>) -> Result<(), StepError> {
+        self.begin(frame, Slices::Staged)
+    }
+
+    /// [`SatMap::step_begin`], remembering what the slices must find again where they may be
+    /// given another frame (`Slices::Staged`).
+    fn begin(&mut self, frame: &Frame<'_>, slices: Slices) -> Result<(), StepError> {
         if let Some(p) = &self.pending {
             return Err(StepError::StepInProgress {
                 sequence: p.sequence,
             });
         }
         let cameras = check_frame(frame, &self.dims, &self.limits, self.last)?;
-        let images = core::array::from_fn(|c| {
-            frame.images[c]
-                .as_ref()
-                .filter(|_| cameras.mask.contains(c))
-                .map(ImageSeen::of)
-        });
+        let seen = match slices {
+            Slices::OneCall => None,
+            Slices::Staged => Some(core::array::from_fn(|c| {
+                frame.images[c]
+                    .as_ref()
+                    .filter(|_| cameras.mask.contains(c))
+                    .map(ImageSeen::of)
+            })),
+        };
         self.pending = Some(Pending {
             sequence: frame.sequence,
             timestamp_us: frame.timestamp_us,
             pose: frame.pose,
             motion: frame.motion,
-            images,
+            seen,
             cameras,
             slot: 0,
             prior: SatellitePrior::Missing,
@@ -338,12 +350,11 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                     &mut b.logits,
                     &mut b.points,
                 )?;
+                finite(slice, &[&b.logits])?;
                 // Points are normalised to the BEV range (sigmoid outputs in [0, 1]); a finite
                 // but huge value would still decode to an infinite coordinate in metres, so
-                // bound them too.
-                if !(b.logits.iter().all(|v| v.is_finite())
-                    && b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT))
-                {
+                // they are bounded, not only finite (NaN fails the bound too).
+                if !b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT) {
                     return Err(StepError::NonFiniteOutput { slice });
                 }
             }
@@ -522,8 +533,10 @@ fn finite(slice: StepSlice, outputs: &[&[f32]]) -> Result<(), StepError> {
     }
 }
 
-/// The part of `frame` that `slice` reads and that differs from what `step_begin` checked.
+/// The part of `frame` that `slice` reads and that differs from what `step_begin` checked;
+/// always `None` in a one-call step.
 fn changed_part(slice: StepSlice, frame: &Frame<'_>, p: &Pending) -> Option<FramePart> {
+    let seen = p.seen.as_ref()?;
     match slice {
         StepSlice::BevQuery => {
             (frame.pose != p.pose || frame.motion != p.motion).then_some(FramePart::Motion)
@@ -531,7 +544,7 @@ fn changed_part(slice: StepSlice, frame: &Frame<'_>, p: &Pending) -> Option<Fram
         StepSlice::ImageEncoder { camera } => {
             let c = usize::from(camera);
             let now = frame.images.get(c).copied().flatten();
-            (now.as_ref().map(ImageSeen::of) != p.images.get(c).copied().flatten())
+            (now.as_ref().map(ImageSeen::of) != seen.get(c).copied().flatten())
                 .then_some(FramePart::Image { camera })
         }
         _ => None,

@@ -106,6 +106,15 @@ pub enum FramePart {
     },
 }
 
+/// How a step's slices get their frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Slices {
+    /// `step`: one borrowed frame for every slice.
+    OneCall,
+    /// `step_begin` / `step_run_next`: a frame per slice, checked against what began.
+    Staged,
+}
+
 /// What `step_begin` saw of one camera's image: a slice that reads it again must find the same.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct ImageSeen {
@@ -134,8 +143,9 @@ pub(super) struct Pending {
     pub(super) timestamp_us: u64,
     pub(super) pose: EgoPose,
     pub(super) motion: EgoMotion,
-    /// The images of the cameras that take part, as checked.
-    pub(super) images: [Option<ImageSeen>; NUM_CAMERAS],
+    /// What `step_begin` saw of each used camera's image, for a staged step; `None` in a
+    /// one-call step, whose slices all read the one frame `step` borrows.
+    pub(super) seen: Option<[Option<ImageSeen>; NUM_CAMERAS]>,
     pub(super) cameras: CameraUse,
     /// Next slot of the fixed sequence (skipping left-out cameras).
     pub(super) slot: usize,
