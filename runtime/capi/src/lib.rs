@@ -9,18 +9,20 @@
 //! [`SatmapStatus`] and never unwinds across the boundary (a caught panic is
 //! [`SatmapStatus::Panic`], after which the runtime must be destroyed).
 
+mod create;
 mod ffi_types;
 mod runtime;
 mod status;
 
+pub use create::{satmap_create, satmap_destroy, satmap_region_info};
 pub use ffi_types::{
     SATMAP_DEFAULT_DATA_ID, SATMAP_MAX_WIRE_BYTES, SATMAP_NUM_CAMERAS, SATMAP_REGION_ALIGN,
     SATMAP_REGION_COUNT, SatmapCameraImage, SatmapFrame, SatmapRegion, SatmapRegionInfo,
     SatmapSlice, SatmapSliceInfo,
 };
 pub use runtime::{
-    SatmapRuntime, satmap_check_map_frame, satmap_create, satmap_destroy, satmap_kernel_family,
-    satmap_last_error, satmap_map_frame, satmap_recalibrate, satmap_region_info, satmap_step,
-    satmap_step_abort, satmap_step_begin, satmap_step_finish, satmap_step_run_next,
+    SatmapRuntime, satmap_check_map_frame, satmap_kernel_family, satmap_last_error,
+    satmap_map_frame, satmap_recalibrate, satmap_step, satmap_step_abort, satmap_step_begin,
+    satmap_step_finish, satmap_step_run_next,
 };
 pub use status::SatmapStatus;
