@@ -122,7 +122,8 @@ $(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # regions, natively (digests must equal the Rust run's, examples/c/expected-<family>.txt, checked by
 # tests/integration/c_api.rs; every CRC check and every bit flip of a frame caught), then the first two
 # frames again under valgrind (any memory error or leak fails; see replay.c on why digests are
-# not compared there).
+# not compared there). Then once more the way an ECU creates it: a key pair made, a copy of the
+# bundle signed, `satmap_create_trusted` verifying the signature (and refusing another pin).
 # The static library `cargo test` builds for the workspace (crate-type staticlib): the same
 # command as test-rust, so nothing is rebuilt; `cargo build -p satmap-capi` alone would unify
 # other dependency features and recompile tract (~7 min).
@@ -138,6 +139,13 @@ test-c:
 	$(CC) -std=c11 -Wall -Wextra -Werror -g -O1 -I runtime/capi/include examples/c/replay.c \
 	  $(CAPI_LIB) -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o $(C_REPLAY)
 	$(C_REPLAY) $(C_REPLAY_ARGS)
+	rm -rf target/c/signed && mkdir -p target/c/signed
+	target/debug/satmap-sim keygen --out-dir target/c/signed
+	cp models/bundles/test.satmap target/c/signed/
+	target/debug/satmap-sim sign-bundle --key target/c/signed/bundle-signing.key \
+	  target/c/signed/test.satmap
+	$(C_REPLAY) target/c/signed/test.satmap $(wordlist 2,4,$(C_REPLAY_ARGS)) \
+	  target/c/signed/bundle-signing.pub
 	command -v valgrind >/dev/null || flock /tmp/satmap-apt.lock \
 	  sh -c 'apt-get update -qq && apt-get install -y -qq valgrind'  # the lock: targets/toolchain.sh
 	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite,indirect \

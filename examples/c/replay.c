@@ -2,7 +2,12 @@
  * caller-owned regions, checks every published map frame's E2E protection and compares its
  * digest with the Rust run. Exit status 0 only when every check passes.
  *
- * Usage: replay <bundle dir> <calibration.toml> <scenario.bin> <expected dir> [memcheck]
+ * Usage: replay <bundle> <calibration.toml> <scenario.bin> <expected dir> [<key.pub>] [memcheck]
+ *
+ * With <key.pub> (a `satmap-sim keygen` public key; `make test-c` signs a copy of the bundle
+ * with its secret half) the runtime is created the way an ECU creates it: satmap_create_trusted
+ * with SATMAP_TRUST_SIGNED, the signature read from <bundle>.sig; a pin on another digest is
+ * refused first (SATMAP_STATUS_BUNDLE_NOT_PINNED).
  *
  * Digests are bit-identical within a family of graph kernels, not across families: the replay
  * asks the library which family this CPU runs (satmap_kernel_family()) and compares with
@@ -81,14 +86,35 @@ static const char *status_name(SatmapStatus s) {
     case SATMAP_STATUS_FRAME_REJECTED: return "FRAME_REJECTED";
     case SATMAP_STATUS_STEP_IN_PROGRESS: return "STEP_IN_PROGRESS";
     case SATMAP_STATUS_CRC_MISMATCH: return "CRC_MISMATCH";
+    case SATMAP_STATUS_BUNDLE_UNSIGNED: return "BUNDLE_UNSIGNED";
+    case SATMAP_STATUS_BUNDLE_SIGNATURE: return "BUNDLE_SIGNATURE";
+    case SATMAP_STATUS_BUNDLE_NOT_PINNED: return "BUNDLE_NOT_PINNED";
     default: return "other";
   }
 }
 
+/* The 32 key bytes of a `.pub` file: 64 lowercase hex digits, then an optional newline. */
+static int read_public_key(const char *path, uint8_t key[32]) {
+  size_t len = 0;
+  uint8_t *text = read_file(path, &len);
+  int ok = text && (len == 64 || (len == 65 && text[64] == '\n'));
+  for (size_t i = 0; ok && i < 64; i++) {
+    uint8_t c = text[i];
+    int nibble = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+    if (nibble < 0) ok = 0;
+    else if (i % 2 == 0) key[i / 2] = (uint8_t)(nibble << 4);
+    else key[i / 2] |= (uint8_t)nibble;
+  }
+  free(text);
+  return ok;
+}
+
 int main(int argc, char **argv) {
-  if (argc != 5 && !(argc == 6 && strcmp(argv[5], "memcheck") == 0))
-    return fail("usage: replay <bundle> <calibration.toml> <scenario.bin> <expected dir> [memcheck]");
-  int memcheck = argc == 6;
+  int memcheck = argc >= 6 && strcmp(argv[argc - 1], "memcheck") == 0;
+  const char *public_key_path = argc - memcheck == 6 ? argv[5] : NULL;
+  if (argc - memcheck != 5 && argc - memcheck != 6)
+    return fail("usage: replay <bundle> <calibration.toml> <scenario.bin> <expected dir> "
+                "[<key.pub>] [memcheck]");
   char expected_path[4096];
   const char *family = satmap_kernel_family();
   if (snprintf(expected_path, sizeof expected_path, "%s/expected-%s.txt", argv[4], family) >=
@@ -123,7 +149,18 @@ int main(int argc, char **argv) {
   SatmapStatus s = satmap_create(regions, SATMAP_REGION_COUNT, argv[1], argv[2], &rt);
   if (s != SATMAP_STATUS_REGION_TOO_SMALL || rt != NULL) return fail("short region accepted");
   regions[3].len += 1;
-  s = satmap_create(regions, SATMAP_REGION_COUNT, argv[1], argv[2], &rt);
+  if (public_key_path) {
+    SatmapBundleTrust trust = {.kind = SATMAP_TRUST_PINNED};
+    memset(trust.pinned_sha256, 0xA5, sizeof trust.pinned_sha256);
+    s = satmap_create_trusted(regions, SATMAP_REGION_COUNT, argv[1], argv[2], &trust, &rt);
+    if (s != SATMAP_STATUS_BUNDLE_NOT_PINNED || rt != NULL) return fail("another pin accepted");
+    trust.kind = SATMAP_TRUST_SIGNED;
+    if (!read_public_key(public_key_path, trust.public_key)) return fail("unreadable public key");
+    s = satmap_create_trusted(regions, SATMAP_REGION_COUNT, argv[1], argv[2], &trust, &rt);
+    if (s == SATMAP_STATUS_OK) printf("replay: bundle signature verified (%s)\n", public_key_path);
+  } else {
+    s = satmap_create(regions, SATMAP_REGION_COUNT, argv[1], argv[2], &rt);
+  }
   if (s != SATMAP_STATUS_OK) {
     fprintf(stderr, "replay: satmap_create: %s (%d)\n", status_name(s), (int)s);
     return 1;

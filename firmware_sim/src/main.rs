@@ -44,6 +44,11 @@ enum Command {
     Compile(satmap_sim::cli::compile::Args),
     /// Time every stage and the step of a bundle on its reference inputs (JSON; `make bench-peers`).
     BenchStages(satmap_sim::cli::bench_stages::Args),
+    /// Make an Ed25519 key pair for signing bundles (`<name>.key` secret, `<name>.pub` public).
+    Keygen(satmap_sim::cli::keygen::Args),
+    /// Sign bundles with a `keygen` secret key (writes `<bundle>.sig`, or `manifest.sig` inside
+    /// a folder).
+    SignBundle(satmap_sim::cli::sign_bundle::Args),
     /// Print the family of graph kernels this CPU runs (the suffix of per-family digest files).
     KernelFamily,
 }
@@ -64,6 +69,8 @@ fn main() -> std::process::ExitCode {
         Command::CheckBundle(args) => satmap_sim::cli::check_bundle::run(&args),
         Command::Compile(args) => satmap_sim::cli::compile::run(&args),
         Command::BenchStages(args) => satmap_sim::cli::bench_stages::run(&args),
+        Command::Keygen(args) => satmap_sim::cli::keygen::run(&args),
+        Command::SignBundle(args) => satmap_sim::cli::sign_bundle::run(&args),
         Command::KernelFamily => {
             println!("{}", satmap_runtime::engine_tract::kernel_family());
             Ok(())

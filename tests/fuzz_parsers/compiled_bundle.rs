@@ -8,7 +8,7 @@
 //! stay small enough for thousands of them.
 
 use satmap_runtime::bundle::archive::write_archive;
-use satmap_runtime::bundle::{Bundle, Sha256Digest};
+use satmap_runtime::bundle::{Bundle, Sha256Digest, Trust};
 use satmap_runtime::engine::Stage;
 
 use crate::mutate::inputs;
@@ -50,7 +50,8 @@ fn archive_case(input: &Input) -> CaseResult {
     } else {
         input.bytes.clone()
     };
-    let Ok(bundle) = Bundle::from_archive_bytes("fuzz.satmap", bytes, None) else {
+    let Ok(bundle) = Bundle::from_archive_bytes("fuzz.satmap", bytes, &Trust::SelfConsistent, None)
+    else {
         return Ok(Refused);
     };
     for stage in Stage::ALL {

@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use safetensors::SafeTensors;
+use satmap_runtime::bundle::Trust;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_sim::cli::check_bundle::{CheckError, check_all, check_dir};
 use satmap_sim::cli::drive::exit_code;
@@ -32,7 +33,7 @@ fn test_bundle_matches_onnxruntime_in_tract() {
 #[test]
 fn compiled_test_bundle_matches_onnxruntime_in_tract() {
     let compiled = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/bundles/test.satmap");
-    let worst = check_dir(&compiled).unwrap();
+    let worst = check_dir(&compiled, &Trust::SelfConsistent).unwrap();
     assert!(worst <= 1e-4, "{worst:e}");
 }
 
@@ -71,7 +72,7 @@ fn set_f32(bytes: &mut [u8], name: &str, index: usize, value: f32) {
 
 /// The error of `check-bundle` on the bundle, checked to be bad input (exit code 2).
 fn corrupt_message(dir: &Path) -> String {
-    let e = check_dir(dir).unwrap_err();
+    let e = check_dir(dir, &Trust::SelfConsistent).unwrap_err();
     let message = e.to_string();
     assert!(
         matches!(e, CheckError::ReferenceCorrupt { .. }),
@@ -127,7 +128,7 @@ fn a_truncated_reference_is_not_a_safetensors_file() {
 #[test]
 fn a_missing_reference_names_the_file_once() {
     let dir = bundle_with_reference("missing", |p| std::fs::remove_file(p).unwrap());
-    let e = check_dir(&dir).unwrap_err();
+    let e = check_dir(&dir, &Trust::SelfConsistent).unwrap_err();
     let path = dir.join("reference.safetensors");
     assert!(matches!(e, CheckError::ReferenceUnreadable { .. }), "{e}");
     let message = format!("{:#}", anyhow::Error::from(e));

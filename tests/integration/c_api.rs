@@ -190,7 +190,7 @@ fn c_frame(g: &GoldenFrame, s: Step) -> SatmapFrame {
 }
 
 /// Every caller region, sized and named as `satmap_region_info` says, each its own memory.
-fn c_regions() -> Vec<SatmapRegion> {
+pub(crate) fn c_regions() -> Vec<SatmapRegion> {
     (0..SATMAP_REGION_COUNT)
         .map(|i| {
             let mut info = SatmapRegionInfo {

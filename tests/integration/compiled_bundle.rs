@@ -17,7 +17,7 @@ use satmap_runtime::InitError;
 use satmap_runtime::bundle::archive::write_archive;
 use satmap_runtime::bundle::compile::{CompileError, compile, stage_entry_name};
 use satmap_runtime::bundle::{
-    Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Sha256Digest,
+    Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Sha256Digest, Trust,
 };
 use satmap_runtime::capacity::layout;
 use satmap_runtime::engine::Stage;
@@ -47,7 +47,7 @@ fn compiled() -> &'static [u8] {
 }
 
 fn open_compiled(bytes: &[u8]) -> Result<Bundle, BundleError> {
-    Bundle::from_archive_bytes("test.satmap", bytes.to_vec(), None)
+    Bundle::from_archive_bytes("test.satmap", bytes.to_vec(), &Trust::SelfConsistent, None)
 }
 
 /// Every stage buffer after stepping each of the two golden frames through `bundle`.

@@ -5,6 +5,7 @@
 
 mod bundle_check;
 mod bundle_integrity;
+mod bundle_signature;
 mod c_api;
 mod common;
 mod compiled_bundle;

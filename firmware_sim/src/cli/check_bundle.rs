@@ -8,9 +8,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use safetensors::SafeTensors;
-use satmap_runtime::bundle::Bundle;
+use satmap_runtime::bundle::{Bundle, BundlePublicKey, Trust};
 use satmap_runtime::capacity::CAN_BUS_LEN;
 use satmap_runtime::engine::Engine;
 use satmap_runtime::engine_tract::TractEngine;
@@ -26,6 +26,10 @@ pub struct Args {
     /// Largest allowed absolute difference between tract and onnxruntime.
     #[arg(long, default_value_t = 1e-4)]
     pub tolerance: f32,
+    /// Accept only bundles signed by this public key (`<name>.pub` from `keygen`), as an ECU
+    /// given the key does; the signature is read before the bundle is parsed.
+    #[arg(long)]
+    pub public_key: Option<PathBuf>,
 }
 
 /// One stage output compared.
@@ -123,9 +127,13 @@ pub fn run(args: &Args) -> Result<()> {
         ))
         .into());
     }
+    let trust = match &args.public_key {
+        Some(path) => Trust::Signed(read_public_key(path)?),
+        None => Trust::SelfConsistent,
+    };
     let mut worst = 0.0f32;
     for dir in &args.bundles {
-        worst = worst_of(worst, check_dir(dir)?);
+        worst = worst_of(worst, check_dir(dir, &trust)?);
     }
     println!(
         "worst max abs diff {worst:.3e} (tolerance {:.1e})",
@@ -141,17 +149,31 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// Check one bundle folder, printing its lines; returns its worst difference.
+/// The public key of a `.pub` file (read up to one byte past its longest valid form).
+///
+/// # Errors
+/// The file unreadable ([`anyhow`]) or not a key ([`crate::cli::drive::BadArgument`]).
+pub fn read_public_key(path: &Path) -> Result<BundlePublicKey> {
+    use std::io::Read as _;
+    let mut text = Vec::with_capacity(66);
+    std::fs::File::open(path)
+        .and_then(|f| f.take(66).read_to_end(&mut text))
+        .with_context(|| format!("reading {}", path.display()))?;
+    BundlePublicKey::parse(&text)
+        .map_err(|e| crate::cli::drive::BadArgument(format!("{}: {e}", path.display())).into())
+}
+
+/// Check one bundle (accepted under `trust`), printing its lines; returns its worst difference.
 ///
 /// # Errors
 /// Any [`CheckError`] but [`CheckError::Differs`].
-pub fn check_dir(dir: &Path) -> Result<f32, CheckError> {
+pub fn check_dir(dir: &Path, trust: &Trust) -> Result<f32, CheckError> {
     let bundle_error = |e: &dyn std::fmt::Display| CheckError::Bundle {
         path: dir.to_owned(),
         message: e.to_string(),
     };
     let started = std::time::Instant::now();
-    let bundle = Bundle::open(dir).map_err(|e| bundle_error(&e))?;
+    let bundle = Bundle::open_trusted(dir, trust).map_err(|e| bundle_error(&e))?;
     // A compiled bundle `<name>.satmap` is checked against the reference of the folder it was
     // compiled from, `<name>/` beside it (the names `compile`'s README example uses).
     let path = if dir.is_file() {
@@ -174,7 +196,7 @@ pub fn check_dir(dir: &Path) -> Result<f32, CheckError> {
     let mut engine = TractEngine::load(&bundle).map_err(|e| bundle_error(&e))?;
     println!(
         "{}: config `{}`, loaded and optimised in {:.1} s\n  bundle digest {} (pin with \
-         Bundle::open_pinned)",
+         Bundle::open_pinned, satmap_create_trusted)",
         dir.display(),
         crate::harness::bundle_config_name(dir),
         started.elapsed().as_secs_f64(),
@@ -432,31 +454,4 @@ pub fn check_all(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_nan_difference_is_the_worst() {
-        assert!(worst_of(0.0, f32::NAN).is_nan());
-        assert!(worst_of(f32::NAN, 1e-6).is_nan());
-        assert_eq!(worst_of(1e-6, 2e-6), 2e-6);
-        let c = compare("x", &[1.0, f32::NAN, 2.0], &[1.0, 0.0, 2.5], 0.0);
-        assert!(c.max_abs_diff.is_nan());
-    }
-
-    #[test]
-    fn a_tolerance_that_cannot_fail_is_refused_before_any_work() {
-        for tolerance in [f32::NAN, f32::INFINITY, -1e-4] {
-            let args = Args {
-                bundles: vec![PathBuf::from("/nonexistent/bundle")],
-                tolerance,
-            };
-            let e = run(&args).unwrap_err();
-            assert!(
-                e.downcast_ref::<crate::cli::drive::BadArgument>().is_some(),
-                "{tolerance}: {e:#}"
-            );
-            assert!(e.to_string().contains("--tolerance"), "{e}");
-        }
-    }
-}
+mod tests;

@@ -148,6 +148,8 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     }
     // A pack that cannot be built from the given route, imagery and options is bad input.
     if e.downcast_ref::<BadArgument>().is_some()
+        || e.downcast_ref::<satmap_runtime::bundle::BundleError>()
+            .is_some()
         || e.downcast_ref::<crate::route_pack_builder::BuildError>()
             .is_some()
         || matches!(

@@ -7,6 +7,8 @@ pub mod compile;
 pub mod drive;
 pub mod evaluate;
 pub mod export_dataset;
+pub mod keygen;
 pub mod memory_map;
 pub mod render;
+pub mod sign_bundle;
 pub mod synth_drive;

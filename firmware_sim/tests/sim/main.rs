@@ -2,6 +2,7 @@
 //! one a file). `harness_arena` stays a binary of its own: it declares the arena allocator as the
 //! process's global allocator.
 
+mod bundle_signing_cli;
 mod cli_refusals;
 mod common;
 mod eval_chamfer_ap;

@@ -21,6 +21,15 @@
 // The map message's default E2E data id ("SMAP").
 #define SATMAP_DEFAULT_DATA_ID 1397571920
 
+// `SatmapBundleTrust::kind`: any bundle whose own hashes agree (development only).
+#define SATMAP_TRUST_SELF_CONSISTENT 0
+
+// `SatmapBundleTrust::kind`: only the bundle whose digest is `pinned_sha256`.
+#define SATMAP_TRUST_PINNED 1
+
+// `SatmapBundleTrust::kind`: any bundle signed by the secret half of `public_key`.
+#define SATMAP_TRUST_SIGNED 2
+
 // Result of every C API call; 0 is success.
 typedef enum SatmapStatus {
   // Success.
@@ -69,6 +78,13 @@ typedef enum SatmapStatus {
   // Two caller regions share bytes (or one wraps past the end of the address space); nothing
   // was created. Each region must be its own memory.
   SATMAP_STATUS_REGIONS_OVERLAP = 21,
+  // `SATMAP_TRUST_SIGNED` and the bundle has no signature file; nothing was parsed.
+  SATMAP_STATUS_BUNDLE_UNSIGNED = 22,
+  // `SATMAP_TRUST_SIGNED` and the signature file is malformed or does not verify under the
+  // key (another key, or a bundle changed since signing); nothing was parsed.
+  SATMAP_STATUS_BUNDLE_SIGNATURE = 23,
+  // `SATMAP_TRUST_PINNED` and the bundle's digest is another; nothing was parsed.
+  SATMAP_STATUS_BUNDLE_NOT_PINNED = 24,
 } SatmapStatus;
 
 // A slice of a staged step (`satmap_step_run_next`).
@@ -117,6 +133,18 @@ typedef struct SatmapRegion {
   // Bytes available (at least the region's `bytes` from `satmap_region_info`).
   size_t len;
 } SatmapRegion;
+
+// Which bundles `satmap_create_trusted` accepts.
+typedef struct SatmapBundleTrust {
+  // `SATMAP_TRUST_SELF_CONSISTENT`, `SATMAP_TRUST_PINNED` or `SATMAP_TRUST_SIGNED`.
+  uint32_t kind;
+  // The pinned bundle digest (SHA-256, raw bytes; `satmap-sim check-bundle` prints it in
+  // hex); read for `SATMAP_TRUST_PINNED`.
+  uint8_t pinned_sha256[32];
+  // The Ed25519 public key (raw bytes; `keygen`'s `.pub` file holds them in hex); read for
+  // `SATMAP_TRUST_SIGNED`.
+  uint8_t public_key[32];
+} SatmapBundleTrust;
 
 // One camera's image for a step.
 typedef struct SatmapCameraImage {
@@ -184,7 +212,8 @@ enum SatmapStatus satmap_region_info(size_t id, struct SatmapRegionInfo *info);
 // feature), read the calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
 // `SATMAP_REGION_COUNT` entries in region id order, no two sharing a byte
 // (`SATMAP_STATUS_REGIONS_OVERLAP`); each must stay valid and untouched until
-// `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
+// `satmap_destroy`. On failure `*out` is NULL and nothing is kept. Accepts any bundle whose own
+// hashes agree (development): an ECU uses [`satmap_create_trusted`].
 //
 // # Safety
 // `regions` points to `region_count` entries whose memory is valid as stated; the paths are
@@ -194,6 +223,22 @@ enum SatmapStatus satmap_create(const struct SatmapRegion *regions,
                                 const char *bundle_path,
                                 const char *calibration_toml,
                                 struct SatmapRuntime **out);
+
+// [`satmap_create`] accepting only the bundle `trust` allows, decided on the bundle's raw bytes
+// before any of them is parsed: `SATMAP_TRUST_PINNED` accepts the one bundle whose digest is
+// `pinned_sha256` (else `SATMAP_STATUS_BUNDLE_NOT_PINNED`); `SATMAP_TRUST_SIGNED` any bundle
+// whose signature file (`<bundle_path>.sig`: 128 lowercase hex digits, from `satmap-sim
+// sign-bundle`) verifies under the Ed25519 `public_key` (else `SATMAP_STATUS_BUNDLE_UNSIGNED`
+// or `SATMAP_STATUS_BUNDLE_SIGNATURE`). What an ECU should call.
+//
+// # Safety
+// As [`satmap_create`]; `trust` is NULL or valid for a read.
+enum SatmapStatus satmap_create_trusted(const struct SatmapRegion *regions,
+                                        size_t region_count,
+                                        const char *bundle_path,
+                                        const char *calibration_toml,
+                                        const struct SatmapBundleTrust *trust,
+                                        struct SatmapRuntime **out);
 
 // Free a runtime (NULL is ignored); its regions belong to the caller again.
 //

@@ -5,12 +5,16 @@ use core::ffi::{CStr, c_char};
 use std::path::Path;
 
 use satmap_runtime::SatMap;
+use satmap_runtime::bundle::{Bundle, BundlePublicKey, Sha256Digest, Trust};
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::frame::FrameLimits;
 use satmap_runtime::placement::{REGION_ALIGN, REGIONS, RuntimeRegions};
 
-use crate::ffi_types::{SATMAP_REGION_COUNT, SatmapRegion, SatmapRegionInfo};
+use crate::ffi_types::{
+    SATMAP_REGION_COUNT, SATMAP_TRUST_PINNED, SATMAP_TRUST_SELF_CONSISTENT, SATMAP_TRUST_SIGNED,
+    SatmapBundleTrust, SatmapRegion, SatmapRegionInfo,
+};
 use crate::runtime::{CallerCrop, SatmapRuntime, guard};
 use crate::status::SatmapStatus;
 
@@ -88,7 +92,8 @@ pub(crate) fn path_of<'a>(p: *const c_char) -> Result<&'a Path, SatmapStatus> {
 /// feature), read the calibration (TOML), build the look-up table in `gkt_lut`. `regions` holds
 /// `SATMAP_REGION_COUNT` entries in region id order, no two sharing a byte
 /// (`SATMAP_STATUS_REGIONS_OVERLAP`); each must stay valid and untouched until
-/// `satmap_destroy`. On failure `*out` is NULL and nothing is kept.
+/// `satmap_destroy`. On failure `*out` is NULL and nothing is kept. Accepts any bundle whose own
+/// hashes agree (development): an ECU uses [`satmap_create_trusted`].
 ///
 /// # Safety
 /// `regions` points to `region_count` entries whose memory is valid as stated; the paths are
@@ -101,12 +106,91 @@ pub unsafe extern "C" fn satmap_create(
     calibration_toml: *const c_char,
     out: *mut *mut SatmapRuntime,
 ) -> SatmapStatus {
+    // SAFETY: the same contract.
+    unsafe {
+        create(
+            regions,
+            region_count,
+            bundle_path,
+            calibration_toml,
+            Ok(Trust::SelfConsistent),
+            out,
+        )
+    }
+}
+
+/// [`satmap_create`] accepting only the bundle `trust` allows, decided on the bundle's raw bytes
+/// before any of them is parsed: `SATMAP_TRUST_PINNED` accepts the one bundle whose digest is
+/// `pinned_sha256` (else `SATMAP_STATUS_BUNDLE_NOT_PINNED`); `SATMAP_TRUST_SIGNED` any bundle
+/// whose signature file (`<bundle_path>.sig`: 128 lowercase hex digits, from `satmap-sim
+/// sign-bundle`) verifies under the Ed25519 `public_key` (else `SATMAP_STATUS_BUNDLE_UNSIGNED`
+/// or `SATMAP_STATUS_BUNDLE_SIGNATURE`). What an ECU should call.
+///
+/// # Safety
+/// As [`satmap_create`]; `trust` is NULL or valid for a read.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_create_trusted(
+    regions: *const SatmapRegion,
+    region_count: usize,
+    bundle_path: *const c_char,
+    calibration_toml: *const c_char,
+    trust: *const SatmapBundleTrust,
+    out: *mut *mut SatmapRuntime,
+) -> SatmapStatus {
+    // SAFETY: NULL or valid, per the contract.
+    let trust = match unsafe { trust.as_ref() } {
+        None => Err(SatmapStatus::NullArgument),
+        Some(t) => trust_of(t),
+    };
+    // SAFETY: the same contract.
+    unsafe {
+        create(
+            regions,
+            region_count,
+            bundle_path,
+            calibration_toml,
+            trust,
+            out,
+        )
+    }
+}
+
+/// The Rust trust a C one describes; an unknown kind or a public key that is no curve point
+/// is `SATMAP_STATUS_INVALID_ARGUMENT`.
+fn trust_of(t: &SatmapBundleTrust) -> Result<Trust, SatmapStatus> {
+    match t.kind {
+        SATMAP_TRUST_SELF_CONSISTENT => Ok(Trust::SelfConsistent),
+        SATMAP_TRUST_PINNED => Ok(Trust::Pinned(Sha256Digest::from_bytes(t.pinned_sha256))),
+        SATMAP_TRUST_SIGNED => BundlePublicKey::from_bytes(&t.public_key)
+            .map(Trust::Signed)
+            .map_err(|_| SatmapStatus::InvalidArgument),
+        _ => Err(SatmapStatus::InvalidArgument),
+    }
+}
+
+/// Both create functions; `trust` is the caller's, already read (its error is returned once
+/// `out` is cleared).
+///
+/// # Safety
+/// As [`satmap_create`].
+unsafe fn create(
+    regions: *const SatmapRegion,
+    region_count: usize,
+    bundle_path: *const c_char,
+    calibration_toml: *const c_char,
+    trust: Result<Trust, SatmapStatus>,
+    out: *mut *mut SatmapRuntime,
+) -> SatmapStatus {
     guard(|| {
         // SAFETY: NULL or valid, per the contract.
         let Some(out) = (unsafe { out.as_mut() }) else {
             return SatmapStatus::NullArgument;
         };
         *out = core::ptr::null_mut();
+        let trust = match trust {
+            Ok(t) => t,
+            Err(status) => return status,
+        };
         if regions.is_null() {
             return SatmapStatus::NullArgument;
         }
@@ -146,8 +230,13 @@ pub unsafe extern "C" fn satmap_create(
         let Ok(calibration) = from_toml_file(calibration) else {
             return SatmapStatus::Calibration;
         };
-        let Ok(engine) = TractEngine::open(bundle) else {
-            return SatmapStatus::Bundle;
+        let engine = match Bundle::open_trusted(bundle, &trust) {
+            Ok(b) => TractEngine::load(&b),
+            Err(e) => Err(e),
+        };
+        let engine = match engine {
+            Ok(engine) => engine,
+            Err(e) => return SatmapStatus::from(&e),
         };
         let satellite = CallerCrop {
             rgb: core::ptr::null(),

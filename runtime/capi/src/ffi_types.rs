@@ -23,6 +23,27 @@ const _: () = assert!(SATMAP_REGION_ALIGN == REGION_ALIGN);
 const _: () = assert!(SATMAP_MAX_WIRE_BYTES == MAX_WIRE_BYTES);
 const _: () = assert!(SATMAP_DEFAULT_DATA_ID == DEFAULT_DATA_ID);
 
+/// `SatmapBundleTrust::kind`: any bundle whose own hashes agree (development only).
+pub const SATMAP_TRUST_SELF_CONSISTENT: u32 = 0;
+/// `SatmapBundleTrust::kind`: only the bundle whose digest is `pinned_sha256`.
+pub const SATMAP_TRUST_PINNED: u32 = 1;
+/// `SatmapBundleTrust::kind`: any bundle signed by the secret half of `public_key`.
+pub const SATMAP_TRUST_SIGNED: u32 = 2;
+
+/// Which bundles `satmap_create_trusted` accepts.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct SatmapBundleTrust {
+    /// `SATMAP_TRUST_SELF_CONSISTENT`, `SATMAP_TRUST_PINNED` or `SATMAP_TRUST_SIGNED`.
+    pub kind: u32,
+    /// The pinned bundle digest (SHA-256, raw bytes; `satmap-sim check-bundle` prints it in
+    /// hex); read for `SATMAP_TRUST_PINNED`.
+    pub pinned_sha256: [u8; 32],
+    /// The Ed25519 public key (raw bytes; `keygen`'s `.pub` file holds them in hex); read for
+    /// `SATMAP_TRUST_SIGNED`.
+    pub public_key: [u8; 32],
+}
+
 /// One caller-owned memory region.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]

@@ -14,11 +14,12 @@ mod ffi_types;
 mod runtime;
 mod status;
 
-pub use create::{satmap_create, satmap_destroy, satmap_region_info};
+pub use create::{satmap_create, satmap_create_trusted, satmap_destroy, satmap_region_info};
 pub use ffi_types::{
     SATMAP_DEFAULT_DATA_ID, SATMAP_MAX_WIRE_BYTES, SATMAP_NUM_CAMERAS, SATMAP_REGION_ALIGN,
-    SATMAP_REGION_COUNT, SatmapCameraImage, SatmapFrame, SatmapRegion, SatmapRegionInfo,
-    SatmapSlice, SatmapSliceInfo,
+    SATMAP_REGION_COUNT, SATMAP_TRUST_PINNED, SATMAP_TRUST_SELF_CONSISTENT, SATMAP_TRUST_SIGNED,
+    SatmapBundleTrust, SatmapCameraImage, SatmapFrame, SatmapRegion, SatmapRegionInfo, SatmapSlice,
+    SatmapSliceInfo,
 };
 pub use runtime::{
     SatmapRuntime, satmap_check_map_frame, satmap_kernel_family, satmap_last_error,

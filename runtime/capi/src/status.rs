@@ -1,5 +1,6 @@
 //! The error codes every C function returns, and how Rust errors map onto them.
 
+use satmap_runtime::bundle::BundleError;
 use satmap_runtime::map_frame::wire::WireError;
 use satmap_runtime::{InitError, StepError};
 
@@ -53,6 +54,26 @@ pub enum SatmapStatus {
     /// Two caller regions share bytes (or one wraps past the end of the address space); nothing
     /// was created. Each region must be its own memory.
     RegionsOverlap = 21,
+    /// `SATMAP_TRUST_SIGNED` and the bundle has no signature file; nothing was parsed.
+    BundleUnsigned = 22,
+    /// `SATMAP_TRUST_SIGNED` and the signature file is malformed or does not verify under the
+    /// key (another key, or a bundle changed since signing); nothing was parsed.
+    BundleSignature = 23,
+    /// `SATMAP_TRUST_PINNED` and the bundle's digest is another; nothing was parsed.
+    BundleNotPinned = 24,
+}
+
+impl From<&BundleError> for SatmapStatus {
+    fn from(e: &BundleError) -> Self {
+        match e {
+            BundleError::Unsigned { .. } => Self::BundleUnsigned,
+            BundleError::SignatureFile { .. } | BundleError::BadSignature { .. } => {
+                Self::BundleSignature
+            }
+            BundleError::NotPinned { .. } => Self::BundleNotPinned,
+            _ => Self::Bundle,
+        }
+    }
 }
 
 impl From<&InitError> for SatmapStatus {

@@ -54,6 +54,12 @@ impl Sha256Digest {
         Ok(Self(out))
     }
 
+    /// The digest of 32 raw bytes (a pin handed over C).
+    #[must_use]
+    pub const fn from_bytes(bytes: [u8; 32]) -> Self {
+        Self(bytes)
+    }
+
     /// The raw 32 bytes.
     #[must_use]
     pub const fn as_bytes(&self) -> &[u8; 32] {

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use super::{DigestParseError, GraphFormat, Sha256Digest};
+use super::{DigestParseError, GraphFormat, KeyTextError, Sha256Digest};
 
 /// Why a bundle could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -43,6 +43,33 @@ pub enum BundleError {
         recorded: Sha256Digest,
         /// Digest of the archive's bytes before that entry.
         actual: Sha256Digest,
+    },
+    /// The runtime accepts signed bundles only and this one has no readable signature file
+    /// (or, from bytes, none was given).
+    #[error("{path}: no bundle signature ({reason}); this runtime accepts signed bundles only")]
+    Unsigned {
+        /// Where the signature was looked for.
+        path: PathBuf,
+        /// The OS error, or "none given".
+        reason: String,
+    },
+    /// The signature file is not one strict hex signature.
+    #[error("{path}: {reason}")]
+    SignatureFile {
+        /// The signature file.
+        path: PathBuf,
+        /// What is wrong with its text.
+        reason: KeyTextError,
+    },
+    /// The signature does not verify: another key signed it, or the bundle changed since.
+    #[error("{path}: the signature does not verify bundle digest {digest} under public key {key}")]
+    BadSignature {
+        /// The bundle.
+        path: PathBuf,
+        /// The bundle digest of the raw bytes.
+        digest: Sha256Digest,
+        /// The key the runtime was given, hex.
+        key: String,
     },
     /// The bundle is not the one the integrator pinned.
     #[error("bundle {dir} has digest {actual}, the pinned digest is {pinned}")]

@@ -19,11 +19,15 @@ mod digest;
 mod error;
 mod manifest;
 mod model_table;
+pub mod signature;
 
 pub use digest::{DigestParseError, Sha256Digest};
 pub use error::BundleError;
 pub use manifest::{CompiledFrom, DType, Manifest, Precision, StageEntry, TensorSpec};
 pub use model_table::ModelTable;
+pub use signature::{
+    BundlePublicKey, BundleSignature, KeyTextError, Trust, archive_digest_unparsed, signature_path,
+};
 
 use std::borrow::Cow;
 use std::path::{Component, Path, PathBuf};
@@ -78,12 +82,13 @@ pub struct Bundle {
 
 impl Bundle {
     /// Open and verify the bundle at `path`: a compiled bundle file or a bundle folder (see the
-    /// module doc for every check).
+    /// module doc for every check), accepting any self-consistent one ([`Trust::SelfConsistent`]:
+    /// development; an ECU opens with [`Bundle::open_trusted`]).
     ///
     /// # Errors
     /// The first check that fails, as a [`BundleError`] naming the file and stage.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, BundleError> {
-        Self::open_checked(path.as_ref(), None)
+        Self::open_trusted(path, &Trust::SelfConsistent)
     }
 
     /// [`Bundle::open`], and refuse any bundle whose digest is not `pinned`: the integrator's
@@ -92,28 +97,56 @@ impl Bundle {
     /// # Errors
     /// [`BundleError::NotPinned`] for another bundle, else as [`Bundle::open`].
     pub fn open_pinned(path: impl AsRef<Path>, pinned: Sha256Digest) -> Result<Self, BundleError> {
-        Self::open_checked(path.as_ref(), Some(pinned))
+        Self::open_trusted(path, &Trust::Pinned(pinned))
     }
 
-    /// Verify the bytes of a compiled bundle (read by the caller, e.g. from flash) and keep
-    /// them; `path` only names it in errors.
+    /// [`Bundle::open`] under `trust`, checked on the raw bytes before any of them is parsed
+    /// ([`signature`]): a signed bundle's signature is read from [`signature_path`].
     ///
     /// # Errors
-    /// As [`Bundle::open`].
+    /// [`BundleError::Unsigned`], [`BundleError::SignatureFile`], [`BundleError::BadSignature`]
+    /// or [`BundleError::NotPinned`] when `trust` refuses it, else as [`Bundle::open`].
+    pub fn open_trusted(path: impl AsRef<Path>, trust: &Trust) -> Result<Self, BundleError> {
+        let path = path.as_ref();
+        let signature = match trust {
+            Trust::Signed(_) => Some(read_signature(&signature_path(path))?),
+            Trust::SelfConsistent | Trust::Pinned(_) => None,
+        };
+        if path.is_file() {
+            let bytes = read(path)?;
+            Self::from_archive_bytes(path, bytes, trust, signature.as_ref())
+        } else {
+            Self::open_dir(path, trust, signature.as_ref())
+        }
+    }
+
+    /// Verify the bytes of a compiled bundle (read by the caller, e.g. from flash) under
+    /// `trust` (`signature`: the bundle's, needed by [`Trust::Signed`]) and keep them; `path`
+    /// only names it in errors.
+    ///
+    /// # Errors
+    /// As [`Bundle::open_trusted`].
     pub fn from_archive_bytes(
         path: impl Into<PathBuf>,
         bytes: Vec<u8>,
-        pinned: Option<Sha256Digest>,
+        trust: &Trust,
+        signature: Option<&BundleSignature>,
     ) -> Result<Self, BundleError> {
         let path = path.into();
+        let raw_digest = archive_digest_unparsed(&bytes).ok_or_else(|| BundleError::Archive {
+            message: format!(
+                "{} bytes: a compiled bundle is whole 512-byte blocks, at least {}",
+                bytes.len(),
+                signature::ARCHIVE_TRAILER_BYTES
+            ),
+        })?;
+        check_trust(&path, raw_digest, trust, signature)?;
         let (archive, manifest) = archive::Archive::parse(&path, bytes)?;
-        if let Some(pinned) = pinned
-            && pinned != archive.digest
-        {
-            return Err(BundleError::NotPinned {
-                dir: path,
-                pinned,
-                actual: archive.digest,
+        if archive.digest != raw_digest {
+            // Unreachable for an archive in canonical form; kept so that what was verified is
+            // by construction what is loaded.
+            return Err(BundleError::Archive {
+                message: "the digest entry is not the archive's last entry".into(),
             });
         }
         Ok(Self {
@@ -126,16 +159,11 @@ impl Bundle {
         })
     }
 
-    fn open_checked(path: &Path, pinned: Option<Sha256Digest>) -> Result<Self, BundleError> {
-        if path.is_file() {
-            let bytes = read(path)?;
-            Self::from_archive_bytes(path, bytes, pinned)
-        } else {
-            Self::open_dir(path, pinned)
-        }
-    }
-
-    fn open_dir(dir: &Path, pinned: Option<Sha256Digest>) -> Result<Self, BundleError> {
+    fn open_dir(
+        dir: &Path,
+        trust: &Trust,
+        signature: Option<&BundleSignature>,
+    ) -> Result<Self, BundleError> {
         let dir = dir.to_path_buf();
         let path = dir.join(MANIFEST_FILE);
         let bytes = read(&path)?;
@@ -150,15 +178,7 @@ impl Bundle {
                 actual: digest,
             });
         }
-        if let Some(pinned) = pinned
-            && pinned != digest
-        {
-            return Err(BundleError::NotPinned {
-                dir,
-                pinned,
-                actual: digest,
-            });
-        }
+        check_trust(&dir, digest, trust, signature)?;
         let manifest = checked_manifest(&path, &bytes)?;
         let mut stage_digests = [digest; Stage::ALL.len()];
         for (slot, stage) in stage_digests.iter_mut().zip(Stage::ALL) {
@@ -254,6 +274,54 @@ impl Bundle {
     pub fn stage_digest(&self, stage: Stage) -> Sha256Digest {
         self.stage_digests[stage as usize]
     }
+}
+
+/// Whether `trust` accepts the bundle at `path` with `digest` (of its raw bytes) and
+/// `signature`.
+fn check_trust(
+    path: &Path,
+    digest: Sha256Digest,
+    trust: &Trust,
+    signature: Option<&BundleSignature>,
+) -> Result<(), BundleError> {
+    match trust {
+        Trust::SelfConsistent => Ok(()),
+        Trust::Pinned(pinned) if *pinned == digest => Ok(()),
+        Trust::Pinned(pinned) => Err(BundleError::NotPinned {
+            dir: path.to_path_buf(),
+            pinned: *pinned,
+            actual: digest,
+        }),
+        Trust::Signed(key) => match signature {
+            Some(signature) if key.verifies(&digest, signature) => Ok(()),
+            Some(_) => Err(BundleError::BadSignature {
+                path: path.to_path_buf(),
+                digest,
+                key: key.to_string(),
+            }),
+            None => Err(BundleError::Unsigned {
+                path: path.to_path_buf(),
+                reason: "none given".into(),
+            }),
+        },
+    }
+}
+
+/// The signature file at `path`, read up to one byte past its longest valid form (so that a
+/// huge file or `/dev/zero` costs nothing).
+fn read_signature(path: &Path) -> Result<BundleSignature, BundleError> {
+    use std::io::Read as _;
+    let mut text = Vec::with_capacity(130);
+    std::fs::File::open(path)
+        .and_then(|file| file.take(130).read_to_end(&mut text))
+        .map_err(|e| BundleError::Unsigned {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+    BundleSignature::parse(&text).map_err(|reason| BundleError::SignatureFile {
+        path: path.to_path_buf(),
+        reason,
+    })
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, BundleError> {

@@ -29,7 +29,7 @@ mod test_graphs;
 use std::time::Instant;
 
 use super::archive::write_archive;
-use super::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision};
+use super::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Trust};
 use crate::engine::Stage;
 use crate::engine_tract::{HalfArithmetic, check_graph_io, engine_error, nnef_model, onnx_model};
 use crate::error::InitError;
@@ -169,7 +169,7 @@ pub fn compile(
         .collect();
     let bytes = write_archive(manifest.as_bytes(), &entries)?;
     // What the archive reader accepts, or nothing is returned.
-    Bundle::from_archive_bytes(bundle.path(), bytes.clone(), None)?;
+    Bundle::from_archive_bytes(bundle.path(), bytes.clone(), &Trust::SelfConsistent, None)?;
     Ok(Compiled { bytes, stages })
 }
 
