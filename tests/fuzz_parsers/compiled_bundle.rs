@@ -21,7 +21,7 @@ fn stand_in(stage: Stage) -> Vec<u8> {
 }
 
 /// The committed compiled bundle's manifest, each stage's `sha256` that of its stand-in.
-fn seed_manifest() -> String {
+pub(crate) fn seed_manifest() -> String {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/models/bundles/test.satmap");
     let bundle = Bundle::open(path).unwrap();
     let mut text = String::from_utf8(bundle.manifest_bytes().to_vec()).unwrap();
@@ -32,7 +32,7 @@ fn seed_manifest() -> String {
     text
 }
 
-fn reseal(manifest: &[u8]) -> Vec<u8> {
+pub(crate) fn reseal(manifest: &[u8]) -> Vec<u8> {
     let stages: Vec<(String, Vec<u8>)> = Stage::ALL
         .iter()
         .map(|&s| (format!("{}.nnef.tar", s.name()), stand_in(s)))

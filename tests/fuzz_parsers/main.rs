@@ -1,6 +1,6 @@
 //! The fuzz pass over every parser that takes outside bytes: route pack, its compressed tile
 //! payloads (through the JPEG and zlib decoders), bundle manifest (with
-//! its `manifest.sha256`), the compiled bundle archive, calibration TOML, `memory_layout.toml`, the scenario folder's files
+//! its `manifest.sha256`), the compiled bundle archive (and signed: archive and signature), calibration TOML, `memory_layout.toml`, the scenario folder's files
 //! (`scenario.toml`, `frame.toml`, `gt.json`), MapTR results / ground-truth JSON (all three
 //! layouts) and the GeoJSON route.
 //!
@@ -38,6 +38,7 @@ mod route_pack;
 mod runner;
 mod scenario;
 mod seeds;
+mod signed_bundle;
 mod tile_decode;
 
 use satmap_sim::eval::maptr_json::MAX_COORDINATE_M;
