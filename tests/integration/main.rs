@@ -9,6 +9,7 @@ mod bundle_signature;
 mod c_api;
 mod common;
 mod compiled_bundle;
+mod forged_graphs;
 mod golden_step;
 mod layout_variants;
 mod route_frame_distortion;

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use super::graph_check::GraphCheckError;
 use super::{DigestParseError, GraphFormat, KeyTextError, Sha256Digest};
 
 /// Why a bundle could not be loaded.
@@ -169,6 +170,15 @@ pub enum BundleError {
         format: GraphFormat,
         /// What would load it.
         needs: &'static str,
+    },
+    /// A stage's graph failed the structural check before the engine parsed it (or, parsed, has
+    /// a tensor beyond the size limit).
+    #[error("stage `{stage}`: graph refused before the engine ran it: {source}")]
+    Graph {
+        /// The stage name.
+        stage: &'static str,
+        /// The rule it broke.
+        source: GraphCheckError,
     },
     /// The graph engine refused a stage.
     #[error("stage `{stage}`: graph engine error: {message}")]

@@ -17,6 +17,7 @@ pub mod archive;
 pub mod compile;
 mod digest;
 mod error;
+pub mod graph_check;
 mod manifest;
 mod model_table;
 pub mod signature;

@@ -5,6 +5,7 @@
 use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
 
+use crate::bundle::graph_check::{GraphCheckError, MAX_TENSOR_ELEMENTS, check_nnef_stage};
 use crate::bundle::{BundleError, DType, Precision, StageEntry, TensorSpec};
 use crate::engine::Stage;
 
@@ -78,7 +79,15 @@ pub(crate) fn nnef_model(
     use tract_nnef::tract_core::floats::FloatPrecisionTranslator;
     use tract_nnef::tract_core::transform::ModelTransform as _;
     let engine_err = engine_error(stage);
+    let refused = |source| BundleError::Graph {
+        stage: stage.name(),
+        source,
+    };
+    check_nnef_stage(bytes).map_err(refused)?;
     let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
+    // Before decluttering folds constants (the step where a huge `tile` or reshape would be
+    // materialised): every tensor of the parsed graph has a static size within the limit.
+    check_tensor_sizes(&model).map_err(refused)?;
     check_io_names(stage, &graph_io_names(&model)?, entry)?;
     if precision != Precision::F16 {
         return Ok((model, None));
@@ -99,6 +108,30 @@ pub(crate) fn nnef_model(
         .transform_into(model)
         .map(|m| (m, Some(got)))
         .map_err(engine_err)
+}
+
+/// Every output of every node of `model` has a concrete shape of at most
+/// [`MAX_TENSOR_ELEMENTS`] elements.
+fn check_tensor_sizes(model: &TypedModel) -> Result<(), GraphCheckError> {
+    for node in &model.nodes {
+        for output in &node.outputs {
+            let elements = output.fact.shape.as_concrete().map(|dims| {
+                dims.iter()
+                    .try_fold(1u64, |n, &d| n.checked_mul(d as u64))
+                    .unwrap_or(u64::MAX)
+            });
+            match elements {
+                Some(n) if n <= MAX_TENSOR_ELEMENTS => {}
+                _ => {
+                    return Err(GraphCheckError::TensorSize {
+                        node: node.name.clone(),
+                        shape: format!("{:?}", output.fact.shape),
+                    });
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Whether any operator of `model` turns a float into something else (a cast to an index, a

@@ -17,6 +17,7 @@
 //! (`tests/integration/threads.rs` asserts it over a replay).
 
 use std::num::NonZeroUsize;
+use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
 
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
@@ -183,11 +184,22 @@ impl StageRunner {
             .collect();
         let state = &mut self.state;
         let run = || state.run_plan_with_eval(inputs, vector_state::eval_node);
-        let results = match on_engine_threads(executor, run) {
-            Ok(results) => results,
-            Err(e) => {
+        // A graph tract panics on (an index past a table that only the step's values reveal)
+        // is an error of this stage, not of the process. The state that unwound may hold
+        // half a turn (and references to the inputs): a fresh one from the same plan replaces it.
+        let results = match catch_unwind(AssertUnwindSafe(|| on_engine_threads(executor, run))) {
+            Ok(Ok(results)) => results,
+            Ok(Err(e)) => {
                 self.last_error = Some(format!("{e:#}"));
                 return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)));
+            }
+            Err(panic) => {
+                self.last_error = Some(format!("tract panicked: {}", panic_message(&*panic)));
+                let plan = Arc::clone(self.state.plan());
+                if let Ok(fresh) = plan.spawn() {
+                    self.state = fresh;
+                }
+                return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_PANICKED)));
             }
         };
         if results.len() != outs.len() {
@@ -208,6 +220,15 @@ impl StageRunner {
         }
         Ok(())
     }
+}
+
+/// The text of a caught panic's payload (`panic!` with a literal or a format).
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> &str {
+    payload
+        .downcast_ref::<&str>()
+        .copied()
+        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+        .unwrap_or("(no message)")
 }
 
 /// Run `job` (a whole plan) on the engine's threads, `executor` installed as tract's (and the
@@ -236,6 +257,9 @@ pub const BACKEND_INPUT_DTYPE: u32 = 4;
 pub const BACKEND_OUTPUT_COUNT: u32 = 5;
 /// Backend code: an output is not f32.
 pub const BACKEND_OUTPUT_DTYPE: u32 = 6;
+/// Backend code: tract panicked while running the plan (caught; the stage's state was renewed
+/// and the engine stays usable; the message is in [`TractEngine::last_error`]).
+pub const BACKEND_RUN_PANICKED: u32 = 7;
 
 /// All five stages of a bundle, loaded into tract, implementing [`Engine`].
 pub struct TractEngine {
@@ -278,9 +302,22 @@ impl TractEngine {
     pub fn load_with(bundle: &Bundle, half: HalfArithmetic) -> Result<Self, BundleError> {
         // tract-core's operators only: a graph that needs another registry is refused at load.
         let nnef = tract_nnef::nnef();
+        // tract panics on some graphs it cannot run (an axis past the rank, a stride of 0):
+        // a clean error naming the stage instead. Stack overflow and hangs are not panics; the
+        // structural check before tract (`graph_check`) keeps those graphs away.
         let runners = Stage::ALL
             .iter()
-            .map(|&stage| StageRunner::load(bundle, &nnef, stage, half))
+            .map(|&stage| {
+                catch_unwind(AssertUnwindSafe(|| {
+                    StageRunner::load(bundle, &nnef, stage, half)
+                }))
+                .unwrap_or_else(|panic| {
+                    Err(BundleError::Engine {
+                        stage: stage.name(),
+                        message: format!("tract panicked: {}", panic_message(&*panic)),
+                    })
+                })
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             dims: bundle.dims().clone(),

@@ -1,0 +1,472 @@
+//! `graph.nnef` checked in one pass over its tokens, with a bounded bracket stack and no
+//! recursion, so that no text can make the check itself deep or slow (tract's parser recurses
+//! per nesting level).
+//!
+//! The accepted shape is the one tract-nnef writes for a tract-core graph:
+//! `version 1.0;`, `extension tract_registry tract_core;`, at most one
+//! `fragment tract_core_properties(...) -> (...) { ... }`, one `graph network(...) -> (...)
+//! { statements }`. Every call names an allowlisted operator; every named attribute is
+//! allowlisted and its numbers are range-checked ([`attribute_range`]).
+
+use super::{MAX_NESTING, MAX_STATEMENTS, MAX_TENSOR_ELEMENTS};
+
+/// What is wrong in `graph.nnef`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum TextRule {
+    /// Not UTF-8.
+    #[error("not UTF-8")]
+    NotUtf8,
+    /// A character outside NNEF's tokens, an unterminated string or a malformed number.
+    #[error("not an NNEF token")]
+    Token,
+    /// The header is not `version 1.0;` and tract-core's extension.
+    #[error("header: `{0}` (only `version 1.0;` and `extension tract_registry tract_core;`)")]
+    Header(String),
+    /// A fragment other than tract's properties.
+    #[error("fragment `{0}`: only tract_core_properties is allowed")]
+    Fragment(String),
+    /// No graph, or a second one.
+    #[error("exactly one graph is allowed")]
+    GraphCount,
+    /// Brackets nested deeper than [`MAX_NESTING`], or unbalanced.
+    #[error("brackets nested deeper than {MAX_NESTING} or unbalanced")]
+    Nesting,
+    /// More statements than [`MAX_STATEMENTS`].
+    #[error("more than {MAX_STATEMENTS} statements")]
+    Statements,
+    /// A call of an operator not on the allowlist.
+    #[error("operator `{0}` is not allowed")]
+    Operator(String),
+    /// A named attribute not on the allowlist.
+    #[error("attribute `{0}` is not allowed")]
+    Attribute(String),
+    /// A number out of its attribute's range, beyond 2^31, or not finite.
+    #[error("`{attribute}` = {value} is out of range")]
+    Value {
+        /// The attribute (`literal` outside any).
+        attribute: String,
+        /// The number as written.
+        value: String,
+    },
+    /// A declared shape of more than [`MAX_TENSOR_ELEMENTS`] elements.
+    #[error("a shape of more than {MAX_TENSOR_ELEMENTS} elements")]
+    ShapeTooLarge,
+}
+
+/// Operators a compiled SatMap stage may call: tract-core's NNEF operators our compiler's
+/// graphs use, and the standard NNEF operators of the same kinds a retrained or larger config
+/// may bring (elementwise, reductions, pooling).
+const OPERATORS: &[&str] = &[
+    "abs",
+    "add",
+    "and",
+    "argmax_reduce",
+    "argmin_reduce",
+    "avg_pool",
+    "box",
+    "ceil",
+    "clamp",
+    "concat",
+    "conv",
+    "copy",
+    "cos",
+    "deconv",
+    "div",
+    "eq",
+    "exp",
+    "external",
+    "floor",
+    "ge",
+    "gt",
+    "le",
+    "log",
+    "lt",
+    "matmul",
+    "max",
+    "max_pool",
+    "max_reduce",
+    "mean_reduce",
+    "min",
+    "min_reduce",
+    "mul",
+    "ne",
+    "neg",
+    "not",
+    "or",
+    "pad",
+    "pow",
+    "rcp",
+    "recip",
+    "relu",
+    "reshape",
+    "round",
+    "rsqrt",
+    "select",
+    "sigmoid",
+    "sign",
+    "sin",
+    "slice",
+    "softmax",
+    "split",
+    "sqrt",
+    "square",
+    "squeeze",
+    "sub",
+    "sum_reduce",
+    "tanh",
+    "tile",
+    "transpose",
+    "unsqueeze",
+    "variable",
+    "tract_core_cast",
+    "tract_core_downsample",
+    "tract_core_erf",
+    "tract_core_external",
+    "tract_core_gather",
+    "tract_core_gather_elements",
+    "tract_core_rms_norm",
+];
+
+/// The allowed range of a number under `attribute` (integers; `None`: any finite float, and
+/// integers within 2^31).
+fn attribute_range(attribute: &str) -> Option<(i64, i64)> {
+    Some(match attribute {
+        // Axes of a tensor of rank <= 8, negative from the end.
+        "axis" | "axes" | "axis_start" => (-8, 7),
+        "axis_count" => (-1, 8),
+        "stride" | "dilation" | "size" => (1, 64),
+        "groups" => (1, 1 << 16),
+        "modulo" => (0, 64),
+        "padding" => (0, 1024),
+        "repeats" => (1, 1024),
+        // -1 and 0: reshape's "infer" and "copy".
+        "shape" => (-1, 1 << 24),
+        _ => return None,
+    })
+}
+
+/// Named attributes an operator call may carry.
+const ATTRIBUTES: &[&str] = &[
+    "axes",
+    "axis",
+    "axis_count",
+    "axis_start",
+    "begin",
+    "border",
+    "datum_type",
+    "dilation",
+    "end",
+    "eps",
+    "groups",
+    "label",
+    "modulo",
+    "padding",
+    "repeats",
+    "shape",
+    "size",
+    "stride",
+    "to",
+    "transposeA",
+    "transposeB",
+    "value",
+];
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Token<'a> {
+    Ident(&'a str),
+    Number(&'a str),
+    Str,
+    Punct(u8),
+    Arrow,
+}
+
+/// Tokens of `text` with their 1-based lines; `Err(line)` at the first byte that is no token.
+fn tokens(text: &str) -> impl Iterator<Item = Result<(usize, Token<'_>), usize>> {
+    let bytes = text.as_bytes();
+    let mut at = 0usize;
+    let mut line = 1usize;
+    std::iter::from_fn(move || {
+        loop {
+            match bytes.get(at)? {
+                b'\n' => {
+                    line += 1;
+                    at += 1;
+                }
+                b' ' | b'\t' | b'\r' => at += 1,
+                b'#' => {
+                    while bytes.get(at).is_some_and(|&b| b != b'\n') {
+                        at += 1;
+                    }
+                }
+                _ => break,
+            }
+        }
+        let start = at;
+        let b = bytes[at];
+        let token = if b.is_ascii_alphabetic() || b == b'_' {
+            while bytes
+                .get(at)
+                .is_some_and(|b| b.is_ascii_alphanumeric() || *b == b'_')
+            {
+                at += 1;
+            }
+            Token::Ident(&text[start..at])
+        } else if b.is_ascii_digit() {
+            while bytes
+                .get(at)
+                .is_some_and(|b| b.is_ascii_digit() || matches!(b, b'.' | b'e' | b'E'))
+                || (matches!(bytes.get(at), Some(b'+' | b'-'))
+                    && matches!(bytes.get(at - 1), Some(b'e' | b'E')))
+            {
+                at += 1;
+            }
+            Token::Number(&text[start..at])
+        } else if b == b'"' || b == b'\'' {
+            at += 1;
+            while bytes
+                .get(at)
+                .is_some_and(|&c| c != b && c != b'\n' && c != b'\\')
+            {
+                at += 1;
+            }
+            if bytes.get(at) != Some(&b) {
+                return Some(Err(line));
+            }
+            at += 1;
+            Token::Str
+        } else if b == b'-' && bytes.get(at + 1) == Some(&b'>') {
+            at += 2;
+            Token::Arrow
+        } else if b"()[]{},;=<>:-".contains(&b) {
+            at += 1;
+            Token::Punct(b)
+        } else {
+            return Some(Err(line));
+        };
+        Some(Ok((line, token)))
+    })
+}
+
+/// Where the checker is between top-level items.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Top {
+    /// Expecting `version`, `extension`, `fragment` or `graph`.
+    Item,
+    /// Inside a header line, until `;`.
+    Header,
+    /// Inside a fragment or graph declaration, until its body closes.
+    Declaration,
+}
+
+/// What an open bracket is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Open {
+    close: u8,
+    /// An operator call's argument list (its named attributes are checked).
+    call: bool,
+}
+
+/// Check `text` as the module doc says; `Err((line, rule))` at the first fault.
+pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
+    let mut stack: [Open; MAX_NESTING] = [Open {
+        close: 0,
+        call: false,
+    }; MAX_NESTING];
+    let mut depth = 0usize;
+    let mut top = Top::Item;
+    let mut header: Vec<&str> = Vec::new();
+    let (mut graphs, mut fragments, mut statements) = (0usize, 0usize, 0usize);
+    // The last identifier (a call's name when `(` follows), and `variable<scalar>(`'s name
+    // carried over its type.
+    let mut last_ident: Option<&str> = None;
+    let mut typed_call: Option<&str> = None;
+    // The attribute whose value is being read, and the depth of its call.
+    let mut attribute: Option<(&str, usize)> = None;
+    let mut declared: Option<&str> = None;
+    let mut negative = false;
+    let mut shape_elements: Option<u64> = None;
+    let mut previous: Option<Token<'_>> = None;
+    for token in tokens(text) {
+        let (line, token) = token.map_err(|line| (line, TextRule::Token))?;
+        let fail = |rule| Err((line, rule));
+        match (top, token) {
+            (Top::Item, Token::Ident(word @ ("version" | "extension"))) => {
+                top = Top::Header;
+                header.clear();
+                header.push(word);
+            }
+            (Top::Item, Token::Ident(word @ ("fragment" | "graph"))) => {
+                top = Top::Declaration;
+                declared = Some(word);
+            }
+            (Top::Item, _) => return fail(TextRule::Header(format!("{token:?}"))),
+            (Top::Header, Token::Punct(b';')) => {
+                let line_ok = matches!(
+                    header.as_slice(),
+                    ["version", "1", ".", "0"] | ["version", "1.0"]
+                ) || header.as_slice()
+                    == ["extension", "tract_registry", "tract_core"];
+                if !line_ok {
+                    return fail(TextRule::Header(header.join(" ")));
+                }
+                top = Top::Item;
+            }
+            (Top::Header, Token::Ident(w) | Token::Number(w)) if header.len() < 4 => {
+                header.push(w);
+            }
+            (Top::Header, _) => return fail(TextRule::Header(header.join(" "))),
+            (Top::Declaration, _) => {
+                // The declared name: the identifier right after `fragment` / `graph`.
+                if let (Some(kind), Token::Ident(name)) = (declared, token) {
+                    match kind {
+                        "fragment" if name == "tract_core_properties" && fragments == 0 => {
+                            fragments += 1;
+                        }
+                        "fragment" => return fail(TextRule::Fragment(name.to_owned())),
+                        _ if graphs == 0 => graphs += 1,
+                        _ => return fail(TextRule::GraphCount),
+                    }
+                    declared = None;
+                    previous = Some(token);
+                    continue;
+                }
+                match token {
+                    Token::Punct(open @ (b'(' | b'[' | b'{')) => {
+                        if depth == MAX_NESTING {
+                            return fail(TextRule::Nesting);
+                        }
+                        let callee = match (open, previous) {
+                            (b'(', Some(Token::Ident(name))) => Some(name),
+                            (b'(', Some(Token::Punct(b'>'))) => typed_call.take(),
+                            _ => None,
+                        };
+                        // A call inside a declaration's signature or body (not the declared
+                        // name's own parameter list, which `declared` consumed above).
+                        let in_body = stack[..depth].iter().any(|o| o.close == b'}');
+                        let call = callee.is_some() && in_body;
+                        if let (Some(name), true) = (callee, call)
+                            && !OPERATORS.contains(&name)
+                        {
+                            return fail(TextRule::Operator(name.to_owned()));
+                        }
+                        stack[depth] = Open {
+                            close: match open {
+                                b'(' => b')',
+                                b'[' => b']',
+                                _ => b'}',
+                            },
+                            call,
+                        };
+                        depth += 1;
+                    }
+                    Token::Punct(close @ (b')' | b']' | b'}')) => {
+                        if depth == 0 || stack[depth - 1].close != close {
+                            return fail(TextRule::Nesting);
+                        }
+                        depth -= 1;
+                        if attribute.is_some_and(|(_, d)| d > depth) {
+                            end_attribute(&mut attribute, &mut shape_elements)
+                                .map_err(|rule| (line, rule))?;
+                        }
+                        if close == b'}' && depth == 0 {
+                            top = Top::Item;
+                        }
+                    }
+                    Token::Punct(b',') if attribute.is_some_and(|(_, d)| d == depth) => {
+                        end_attribute(&mut attribute, &mut shape_elements)
+                            .map_err(|rule| (line, rule))?;
+                    }
+                    Token::Punct(b';') if depth == 1 => {
+                        statements += 1;
+                        if statements > MAX_STATEMENTS {
+                            return fail(TextRule::Statements);
+                        }
+                    }
+                    Token::Punct(b'=')
+                        if depth > 0
+                            && stack[depth - 1].call
+                            && matches!(previous, Some(Token::Ident(_))) =>
+                    {
+                        let Some(Token::Ident(name)) = previous else {
+                            unreachable!("matched above")
+                        };
+                        if !ATTRIBUTES.contains(&name) {
+                            return fail(TextRule::Attribute(name.to_owned()));
+                        }
+                        attribute = Some((name, depth));
+                        shape_elements = (name == "shape").then_some(1);
+                    }
+                    Token::Punct(b'<') if matches!(previous, Some(Token::Ident(_))) => {
+                        typed_call = last_ident;
+                    }
+                    Token::Punct(b'-') => {
+                        negative = true;
+                        previous = Some(token);
+                        continue;
+                    }
+                    Token::Number(digits) => {
+                        let name = attribute.map_or("literal", |(a, _)| a);
+                        check_number(name, digits, negative, &mut shape_elements)
+                            .map_err(|rule| (line, rule))?;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        if let Token::Ident(name) = token {
+            last_ident = Some(name);
+        }
+        negative = false;
+        previous = Some(token);
+    }
+    if depth != 0 || top != Top::Item {
+        return Err((0, TextRule::Nesting));
+    }
+    if graphs != 1 {
+        return Err((0, TextRule::GraphCount));
+    }
+    Ok(())
+}
+
+/// The attribute's value ended: a `shape` is checked whole.
+fn end_attribute(
+    attribute: &mut Option<(&str, usize)>,
+    shape_elements: &mut Option<u64>,
+) -> Result<(), TextRule> {
+    *attribute = None;
+    match shape_elements.take() {
+        Some(n) if n > MAX_TENSOR_ELEMENTS => Err(TextRule::ShapeTooLarge),
+        _ => Ok(()),
+    }
+}
+
+/// One number under `attribute`.
+fn check_number(
+    attribute: &str,
+    digits: &str,
+    negative: bool,
+    shape_elements: &mut Option<u64>,
+) -> Result<(), TextRule> {
+    let refuse = || TextRule::Value {
+        attribute: attribute.to_owned(),
+        value: format!("{}{digits}", if negative { "-" } else { "" }),
+    };
+    if digits.contains(['.', 'e', 'E']) {
+        let value: f64 = digits.parse().map_err(|_| refuse())?;
+        return if value.is_finite() && attribute_range(attribute).is_none() {
+            Ok(())
+        } else {
+            Err(refuse())
+        };
+    }
+    let magnitude: i64 = digits.parse().map_err(|_| refuse())?;
+    let value = if negative { -magnitude } else { magnitude };
+    let (low, high) = attribute_range(attribute).unwrap_or((-(1 << 31), 1 << 31));
+    if !(low..=high).contains(&value) {
+        return Err(refuse());
+    }
+    if let Some(n) = shape_elements {
+        *n = n.saturating_mul(value.unsigned_abs().max(1));
+    }
+    Ok(())
+}
