@@ -1,6 +1,6 @@
 //! The fuzz pass over every parser that takes outside bytes: route pack, its compressed tile
 //! payloads (through the JPEG and zlib decoders), bundle manifest (with
-//! its `manifest.sha256`), the compiled bundle archive (and signed: archive and signature), calibration TOML, `memory_layout.toml`, the scenario folder's files
+//! its `manifest.sha256`), the compiled bundle archive (and signed: archive and signature), a stage's NNEF graph (the structural check, then tract's parse), calibration TOML, `memory_layout.toml`, the scenario folder's files
 //! (`scenario.toml`, `frame.toml`, `gt.json`), MapTR results / ground-truth JSON (all three
 //! layouts) and the GeoJSON route.
 //!
@@ -34,6 +34,7 @@ mod manifest;
 mod maptr_json;
 mod memory_layout;
 mod mutate;
+mod nnef_graph;
 mod route_pack;
 mod runner;
 mod scenario;

@@ -110,6 +110,34 @@ pub(crate) fn nnef_model(
         .map_err(engine_err)
 }
 
+/// What the engine does with a compiled stage's bytes before it builds a plan: the structural
+/// check, tract's parse and the tensor-size check, with a tract panic caught and named (for
+/// tools and the fuzz harness; [`super::TractEngine::load`] does the same on the way to a plan).
+///
+/// # Errors
+/// [`BundleError::Graph`] for a rule broken, [`BundleError::Engine`] for tract's refusal or
+/// panic.
+pub fn parse_stage_graph(stage: Stage, bytes: &[u8]) -> Result<(), BundleError> {
+    let refused = |source| BundleError::Graph {
+        stage: stage.name(),
+        source,
+    };
+    check_nnef_stage(bytes).map_err(refused)?;
+    let parse = || {
+        let nnef = tract_nnef::nnef();
+        let model = nnef
+            .model_for_read(&mut &bytes[..])
+            .map_err(engine_error(stage))?;
+        check_tensor_sizes(&model).map_err(refused)
+    };
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse)).unwrap_or_else(|panic| {
+        Err(BundleError::Engine {
+            stage: stage.name(),
+            message: format!("tract panicked: {}", super::panic_message(&*panic)),
+        })
+    })
+}
+
 /// Every output of every node of `model` has a concrete shape of at most
 /// [`MAX_TENSOR_ELEMENTS`] elements.
 fn check_tensor_sizes(model: &TypedModel) -> Result<(), GraphCheckError> {

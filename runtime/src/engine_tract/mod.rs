@@ -54,8 +54,8 @@ use crate::bundle::{Bundle, BundleError, GraphFormat};
 use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
-pub use graph_load::HalfArithmetic;
 pub(crate) use graph_load::onnx_model;
+pub use graph_load::{HalfArithmetic, parse_stage_graph};
 pub(crate) use graph_load::{check_graph_io, datum, engine_error, nnef_model};
 pub use kernel_family::{KernelFamily, kernel_family};
 pub use rewrite::Rewrites;

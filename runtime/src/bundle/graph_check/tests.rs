@@ -74,6 +74,15 @@ fn each_text_rule_refuses_its_edit() {
         rule_of(&edit("transposeB = true", "colour = true")),
         TextRule::Attribute(a) if a == "colour"
     ));
+    // tract looped allocating on this transpose (found by the nnef_graph fuzz harness).
+    assert!(matches!(
+        rule_of(&edit("axes = [1, 0, 2]", "axes = [2, 0, 2]")),
+        TextRule::List { operator, .. } if operator == "transpose"
+    ));
+    assert!(matches!(
+        rule_of(&edit("axes = [1, 0, 2]", "axes = [1, 0, 3]")),
+        TextRule::List { .. }
+    ));
     assert!(matches!(
         rule_of(&edit("shape = [18]", "shape = [65536, 65536]")),
         TextRule::ShapeTooLarge

@@ -48,6 +48,17 @@ pub enum TextRule {
         /// The number as written.
         value: String,
     },
+    /// An attribute's list breaks a rule over the whole list (no permutation, an axis twice,
+    /// more than 16 numbers).
+    #[error("{operator}: `{attribute}` = {values:?} is no valid list")]
+    List {
+        /// The operator.
+        operator: String,
+        /// The attribute.
+        attribute: String,
+        /// Its numbers so far.
+        values: Vec<i64>,
+    },
     /// A declared shape of more than [`MAX_TENSOR_ELEMENTS`] elements.
     #[error("a shape of more than {MAX_TENSOR_ELEMENTS} elements")]
     ShapeTooLarge,
@@ -260,17 +271,30 @@ enum Top {
 
 /// What an open bracket is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Open {
+struct Open<'a> {
     close: u8,
-    /// An operator call's argument list (its named attributes are checked).
-    call: bool,
+    /// The operator whose argument list this is (its named attributes are checked).
+    call: Option<&'a str>,
+}
+
+/// Most numbers one range-checked attribute may hold (a rank-8 padding has 16).
+const MAX_ATTRIBUTE_VALUES: usize = 16;
+
+/// The attribute whose value is being read.
+struct Reading<'a> {
+    name: &'a str,
+    /// The operator it belongs to.
+    operator: &'a str,
+    /// Depth of the call's argument list.
+    depth: usize,
+    values: heapless::Vec<i64, MAX_ATTRIBUTE_VALUES>,
 }
 
 /// Check `text` as the module doc says; `Err((line, rule))` at the first fault.
 pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
-    let mut stack: [Open; MAX_NESTING] = [Open {
+    let mut stack: [Open<'_>; MAX_NESTING] = [Open {
         close: 0,
-        call: false,
+        call: None,
     }; MAX_NESTING];
     let mut depth = 0usize;
     let mut top = Top::Item;
@@ -280,11 +304,9 @@ pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
     // carried over its type.
     let mut last_ident: Option<&str> = None;
     let mut typed_call: Option<&str> = None;
-    // The attribute whose value is being read, and the depth of its call.
-    let mut attribute: Option<(&str, usize)> = None;
+    let mut attribute: Option<Reading<'_>> = None;
     let mut declared: Option<&str> = None;
     let mut negative = false;
-    let mut shape_elements: Option<u64> = None;
     let mut previous: Option<Token<'_>> = None;
     for token in tokens(text) {
         let (line, token) = token.map_err(|line| (line, TextRule::Token))?;
@@ -343,8 +365,8 @@ pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
                         // A call inside a declaration's signature or body (not the declared
                         // name's own parameter list, which `declared` consumed above).
                         let in_body = stack[..depth].iter().any(|o| o.close == b'}');
-                        let call = callee.is_some() && in_body;
-                        if let (Some(name), true) = (callee, call)
+                        let call = callee.filter(|_| in_body);
+                        if let Some(name) = call
                             && !OPERATORS.contains(&name)
                         {
                             return fail(TextRule::Operator(name.to_owned()));
@@ -364,17 +386,15 @@ pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
                             return fail(TextRule::Nesting);
                         }
                         depth -= 1;
-                        if attribute.is_some_and(|(_, d)| d > depth) {
-                            end_attribute(&mut attribute, &mut shape_elements)
-                                .map_err(|rule| (line, rule))?;
+                        if attribute.as_ref().is_some_and(|a| a.depth > depth) {
+                            end_attribute(attribute.take()).map_err(|rule| (line, rule))?;
                         }
                         if close == b'}' && depth == 0 {
                             top = Top::Item;
                         }
                     }
-                    Token::Punct(b',') if attribute.is_some_and(|(_, d)| d == depth) => {
-                        end_attribute(&mut attribute, &mut shape_elements)
-                            .map_err(|rule| (line, rule))?;
+                    Token::Punct(b',') if attribute.as_ref().is_some_and(|a| a.depth == depth) => {
+                        end_attribute(attribute.take()).map_err(|rule| (line, rule))?;
                     }
                     Token::Punct(b';') if depth == 1 => {
                         statements += 1;
@@ -382,19 +402,21 @@ pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
                             return fail(TextRule::Statements);
                         }
                     }
-                    Token::Punct(b'=')
-                        if depth > 0
-                            && stack[depth - 1].call
-                            && matches!(previous, Some(Token::Ident(_))) =>
-                    {
-                        let Some(Token::Ident(name)) = previous else {
-                            unreachable!("matched above")
+                    Token::Punct(b'=') if depth > 0 && stack[depth - 1].call.is_some() => {
+                        let (Some(Token::Ident(name)), Some(operator)) =
+                            (previous, stack[depth - 1].call)
+                        else {
+                            return fail(TextRule::Token);
                         };
                         if !ATTRIBUTES.contains(&name) {
                             return fail(TextRule::Attribute(name.to_owned()));
                         }
-                        attribute = Some((name, depth));
-                        shape_elements = (name == "shape").then_some(1);
+                        attribute = Some(Reading {
+                            name,
+                            operator,
+                            depth,
+                            values: heapless::Vec::new(),
+                        });
                     }
                     Token::Punct(b'<') if matches!(previous, Some(Token::Ident(_))) => {
                         typed_call = last_ident;
@@ -405,8 +427,7 @@ pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
                         continue;
                     }
                     Token::Number(digits) => {
-                        let name = attribute.map_or("literal", |(a, _)| a);
-                        check_number(name, digits, negative, &mut shape_elements)
+                        check_number(attribute.as_mut(), digits, negative)
                             .map_err(|rule| (line, rule))?;
                     }
                     _ => {}
@@ -428,32 +449,60 @@ pub fn check(text: &str) -> Result<(), (usize, TextRule)> {
     Ok(())
 }
 
-/// The attribute's value ended: a `shape` is checked whole.
-fn end_attribute(
-    attribute: &mut Option<(&str, usize)>,
-    shape_elements: &mut Option<u64>,
-) -> Result<(), TextRule> {
-    *attribute = None;
-    match shape_elements.take() {
-        Some(n) if n > MAX_TENSOR_ELEMENTS => Err(TextRule::ShapeTooLarge),
-        _ => Ok(()),
+/// The attribute's value ended: the rules over its whole list (a shape's size, a transpose's
+/// permutation, distinct axes).
+fn end_attribute(reading: Option<Reading<'_>>) -> Result<(), TextRule> {
+    let Some(reading) = reading else {
+        return Ok(());
+    };
+    let values = reading.values.as_slice();
+    let refuse = || TextRule::List {
+        operator: reading.operator.to_owned(),
+        attribute: reading.name.to_owned(),
+        values: values.to_vec(),
+    };
+    match reading.name {
+        "shape" => {
+            let elements = values
+                .iter()
+                .fold(1u64, |n, &d| n.saturating_mul(d.unsigned_abs().max(1)));
+            if elements > MAX_TENSOR_ELEMENTS {
+                return Err(TextRule::ShapeTooLarge);
+            }
+        }
+        "axes" => {
+            // tract loops on a transpose that is no permutation (it allocated 8 GiB on
+            // `[2, 0, 2]`), and an axis named twice means nothing to a reduction.
+            let distinct = values
+                .iter()
+                .enumerate()
+                .all(|(i, a)| !values[..i].contains(a));
+            let permutation = reading.operator != "transpose"
+                || (0..values.len()).all(|i| values.contains(&(i as i64)));
+            if !distinct || !permutation {
+                return Err(refuse());
+            }
+        }
+        _ => {}
     }
+    Ok(())
 }
 
-/// One number under `attribute`.
+/// One number, under the attribute being read (if any).
 fn check_number(
-    attribute: &str,
+    reading: Option<&mut Reading<'_>>,
     digits: &str,
     negative: bool,
-    shape_elements: &mut Option<u64>,
 ) -> Result<(), TextRule> {
+    let attribute = reading.as_ref().map_or("literal", |r| r.name);
     let refuse = || TextRule::Value {
         attribute: attribute.to_owned(),
         value: format!("{}{digits}", if negative { "-" } else { "" }),
     };
+    let range = attribute_range(attribute);
     if digits.contains(['.', 'e', 'E']) {
         let value: f64 = digits.parse().map_err(|_| refuse())?;
-        return if value.is_finite() && attribute_range(attribute).is_none() {
+        return if value.is_finite() && range.is_none() {
             Ok(())
         } else {
             Err(refuse())
@@ -461,12 +510,16 @@ fn check_number(
     }
     let magnitude: i64 = digits.parse().map_err(|_| refuse())?;
     let value = if negative { -magnitude } else { magnitude };
-    let (low, high) = attribute_range(attribute).unwrap_or((-(1 << 31), 1 << 31));
+    let (low, high) = range.unwrap_or((-(1 << 31), 1 << 31));
     if !(low..=high).contains(&value) {
         return Err(refuse());
     }
-    if let Some(n) = shape_elements {
-        *n = n.saturating_mul(value.unsigned_abs().max(1));
+    if let (Some(reading), Some(_)) = (reading, range) {
+        reading.values.push(value).map_err(|_| TextRule::List {
+            operator: reading.operator.to_owned(),
+            attribute: attribute.to_owned(),
+            values: reading.values.to_vec(),
+        })?;
     }
     Ok(())
 }
