@@ -89,6 +89,7 @@ static const char *status_name(SatmapStatus s) {
     case SATMAP_STATUS_BUNDLE_UNSIGNED: return "BUNDLE_UNSIGNED";
     case SATMAP_STATUS_BUNDLE_SIGNATURE: return "BUNDLE_SIGNATURE";
     case SATMAP_STATUS_BUNDLE_NOT_PINNED: return "BUNDLE_NOT_PINNED";
+    case SATMAP_STATUS_LUT_CORRUPT: return "LUT_CORRUPT";
     default: return "other";
   }
 }

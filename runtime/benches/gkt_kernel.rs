@@ -1,4 +1,4 @@
-//! Native GKT gather-sum and look-up-table build, for the `test` and paper shapes, with the
+//! Native GKT gather-sum, look-up-table build and the table's per-step integrity check, for the `test` and paper shapes, with the
 //! table built from the committed nuScenes-like calibration.
 //!
 //! Run: `cargo bench -p satmap-runtime --no-default-features --features std --bench gkt_kernel`.
@@ -46,6 +46,10 @@ fn bench(c: &mut Criterion) {
                 .expect("sizes match");
                 black_box(&out);
             });
+        });
+        // The digest every step checks before the gather (the table is caller memory).
+        c.bench_function(&format!("lut_verify/{name}"), |b| {
+            b.iter(|| black_box(&lut).verify().expect("the table is intact"));
         });
         let mut lut = lut;
         c.bench_function(&format!("lut_rebuild/{name}"), |b| {

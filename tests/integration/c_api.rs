@@ -157,7 +157,7 @@ fn a_map_frame_length_beyond_the_largest_is_refused_unread() {
     }
 }
 
-fn c_frame(g: &GoldenFrame, s: Step) -> SatmapFrame {
+pub(crate) fn c_frame(g: &GoldenFrame, s: Step) -> SatmapFrame {
     let per = g.images.len() / 6;
     let ts = timestamp_us(s.sequence);
     SatmapFrame {
@@ -216,7 +216,7 @@ pub(crate) fn c_regions() -> Vec<SatmapRegion> {
 }
 
 /// `satmap_create` on `regions` with the committed compiled bundle and calibration.
-fn create(regions: &[SatmapRegion]) -> (SatmapStatus, *mut SatmapRuntime) {
+pub(crate) fn create(regions: &[SatmapRegion]) -> (SatmapStatus, *mut SatmapRuntime) {
     let bundle = CString::new(root().join("models/bundles/test.satmap").to_str().unwrap()).unwrap();
     let cal = root().join("models/calibration/nuscenes_like.toml");
     let cal = CString::new(cal.to_str().unwrap()).unwrap();

@@ -7,6 +7,7 @@ mod bundle_check;
 mod bundle_integrity;
 mod bundle_signature;
 mod c_api;
+mod caller_memory;
 mod common;
 mod compiled_bundle;
 mod forged_graphs;

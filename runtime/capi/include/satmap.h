@@ -73,7 +73,9 @@ typedef enum SatmapStatus {
   SATMAP_STATUS_CRC_MISMATCH = 18,
   // A serialised map frame's length, data id or a field is wrong.
   SATMAP_STATUS_WIRE_INVALID = 19,
-  // A Rust panic was caught at the boundary (a runtime bug): destroy the runtime.
+  // A Rust panic was caught at the boundary (a runtime bug, never bad input): the handle is
+  // dead from then on (every call but `satmap_last_error` and `satmap_destroy` answers this
+  // status); destroy it and create another.
   SATMAP_STATUS_PANIC = 20,
   // Two caller regions share bytes (or one wraps past the end of the address space); nothing
   // was created. Each region must be its own memory.
@@ -85,6 +87,10 @@ typedef enum SatmapStatus {
   SATMAP_STATUS_BUNDLE_SIGNATURE = 23,
   // `SATMAP_TRUST_PINNED` and the bundle's digest is another; nothing was parsed.
   SATMAP_STATUS_BUNDLE_NOT_PINNED = 24,
+  // The GKT look-up table in the caller's `gkt_lut` region changed since it was built (a
+  // stray write); nothing was published. Every step answers this until
+  // `satmap_recalibrate` builds the table again.
+  SATMAP_STATUS_LUT_CORRUPT = 25,
 } SatmapStatus;
 
 // A slice of a staged step (`satmap_step_run_next`).
@@ -312,6 +318,16 @@ enum SatmapStatus satmap_check_map_frame(const uint8_t *bytes,
 // # Safety
 // `rt` from `satmap_create`; `calibration_toml` NUL-terminated.
 enum SatmapStatus satmap_recalibrate(struct SatmapRuntime *rt, const char *calibration_toml);
+
+// Restart the runtime's frame counters and drop a staged step in progress (`SatMap::reset`):
+// the next frame is accepted whatever its sequence and timestamp, and no map is published
+// until it steps. For a genuine restart of the caller's counters, or to leave a state the
+// frame checks refuse. Calibration, bundle and regions are kept. A dead handle (an earlier
+// `SATMAP_STATUS_PANIC`) answers `SATMAP_STATUS_PANIC`: it can only be destroyed.
+//
+// # Safety
+// `rt` from `satmap_create`.
+enum SatmapStatus satmap_reset(struct SatmapRuntime *rt);
 
 // Copy the message of the runtime's last failed call into `buf` (NUL-terminated, cut to
 // `cap`); returns the message length without the NUL.

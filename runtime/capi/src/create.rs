@@ -15,7 +15,7 @@ use crate::ffi_types::{
     SATMAP_REGION_COUNT, SATMAP_TRUST_PINNED, SATMAP_TRUST_SELF_CONSISTENT, SATMAP_TRUST_SIGNED,
     SatmapBundleTrust, SatmapRegion, SatmapRegionInfo,
 };
-use crate::runtime::{CallerCrop, SatmapRuntime, guard};
+use crate::runtime::{CallerCrop, Liveness, SatmapRuntime, guard};
 use crate::status::SatmapStatus;
 
 /// Region names with their NUL, in [`REGIONS`] order.
@@ -253,6 +253,7 @@ unsafe fn create(
                 *out = Box::into_raw(Box::new(SatmapRuntime {
                     map,
                     message: heapless::String::new(),
+                    liveness: Liveness::Usable,
                 }));
                 SatmapStatus::Ok
             }

@@ -7,10 +7,12 @@
 //! them valid and untouched until [`satmap_destroy`]; one runtime is driven by one thread at a
 //! time (calls on different runtimes are independent); every function returns a
 //! [`SatmapStatus`] and never unwinds across the boundary (a caught panic is
-//! [`SatmapStatus::Panic`], after which the runtime must be destroyed).
+//! [`SatmapStatus::Panic`], after which the handle is dead and must be destroyed).
 
 mod create;
 mod ffi_types;
+#[cfg(test)]
+mod liveness_tests;
 mod runtime;
 mod status;
 
@@ -23,7 +25,7 @@ pub use ffi_types::{
 };
 pub use runtime::{
     SatmapRuntime, satmap_check_map_frame, satmap_kernel_family, satmap_last_error,
-    satmap_map_frame, satmap_recalibrate, satmap_step, satmap_step_abort, satmap_step_begin,
-    satmap_step_finish, satmap_step_run_next,
+    satmap_map_frame, satmap_recalibrate, satmap_reset, satmap_step, satmap_step_abort,
+    satmap_step_begin, satmap_step_finish, satmap_step_run_next,
 };
 pub use status::SatmapStatus;

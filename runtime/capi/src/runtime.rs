@@ -45,7 +45,24 @@ impl SatelliteSource for CallerCrop {
 pub struct SatmapRuntime {
     pub(crate) map: SatMap<TractEngine, CallerCrop>,
     pub(crate) message: heapless::String<256>,
+    pub(crate) liveness: Liveness,
 }
+
+/// Whether a handle may still be used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Liveness {
+    /// Every call is served.
+    Usable,
+    /// A call panicked inside the runtime (a bug, never bad input: tract's panics are caught
+    /// and named by the engine). What the unwound call left half done is unknown, so nothing
+    /// is served any more: every call but `satmap_last_error` and `satmap_destroy` answers
+    /// `SATMAP_STATUS_PANIC`, `satmap_reset` included.
+    Dead,
+}
+
+/// The message a dead handle keeps.
+const DEAD_MESSAGE: &str = "a call panicked inside the runtime (a bug): this handle is dead; \
+                            satmap_destroy it and satmap_create another";
 
 impl SatmapRuntime {
     fn fail(&mut self, status: SatmapStatus, what: &dyn core::fmt::Display) -> SatmapStatus {
@@ -90,15 +107,39 @@ unsafe fn frame_of<'a>(f: &'a SatmapFrame) -> Frame<'a> {
     }
 }
 
-/// Run `f` on the runtime and frame behind the pointers.
+/// Run `f` on the live runtime behind `rt`: NULL is `NullArgument`, a dead handle `Panic`; a
+/// panic inside `f` is `Panic` and leaves the handle dead ([`Liveness::Dead`]).
+pub(crate) fn with_runtime(
+    rt: *mut SatmapRuntime,
+    f: impl FnOnce(&mut SatmapRuntime) -> SatmapStatus,
+) -> SatmapStatus {
+    // SAFETY: NULL or from satmap_create, per the contract.
+    let Some(handle) = (unsafe { rt.as_mut() }) else {
+        return SatmapStatus::NullArgument;
+    };
+    if handle.liveness == Liveness::Dead {
+        return SatmapStatus::Panic;
+    }
+    let status = guard(|| f(handle));
+    if status == SatmapStatus::Panic {
+        // SAFETY: the same valid pointer; the closure's borrow ended with the unwind.
+        if let Some(handle) = unsafe { rt.as_mut() } {
+            handle.liveness = Liveness::Dead;
+            handle.fail(SatmapStatus::Panic, &DEAD_MESSAGE);
+        }
+    }
+    status
+}
+
+/// Run `f` on the runtime and frame behind the pointers ([`with_runtime`]).
 fn with_frame(
     rt: *mut SatmapRuntime,
     frame: *const SatmapFrame,
     f: impl FnOnce(&mut SatmapRuntime, &Frame<'_>) -> SatmapStatus,
 ) -> SatmapStatus {
-    guard(|| {
-        // SAFETY: NULL or from satmap_create; NULL or a valid frame, per the contract.
-        let (Some(rt), Some(frame)) = (unsafe { rt.as_mut() }, unsafe { frame.as_ref() }) else {
+    with_runtime(rt, |rt| {
+        // SAFETY: NULL or a valid frame, per the contract.
+        let Some(frame) = (unsafe { frame.as_ref() }) else {
             return SatmapStatus::NullArgument;
         };
         // SAFETY: the frame's pointers are valid for this call, per the contract.
@@ -174,15 +215,9 @@ pub unsafe extern "C" fn satmap_step_run_next(
 /// `rt` from `satmap_create`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn satmap_step_finish(rt: *mut SatmapRuntime) -> SatmapStatus {
-    guard(|| {
-        // SAFETY: NULL or from satmap_create.
-        let Some(rt) = (unsafe { rt.as_mut() }) else {
-            return SatmapStatus::NullArgument;
-        };
-        match rt.map.step_finish() {
-            Ok(_) => SatmapStatus::Ok,
-            Err(e) => rt.fail(SatmapStatus::from(&e), &e),
-        }
+    with_runtime(rt, |rt| match rt.map.step_finish() {
+        Ok(_) => SatmapStatus::Ok,
+        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
     })
 }
 
@@ -192,11 +227,7 @@ pub unsafe extern "C" fn satmap_step_finish(rt: *mut SatmapRuntime) -> SatmapSta
 /// `rt` from `satmap_create`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn satmap_step_abort(rt: *mut SatmapRuntime) -> SatmapStatus {
-    guard(|| {
-        // SAFETY: NULL or from satmap_create.
-        let Some(rt) = (unsafe { rt.as_mut() }) else {
-            return SatmapStatus::NullArgument;
-        };
+    with_runtime(rt, |rt| {
         rt.map.step_abort();
         SatmapStatus::Ok
     })
@@ -222,6 +253,9 @@ pub unsafe extern "C" fn satmap_map_frame(
         else {
             return SatmapStatus::NullArgument;
         };
+        if rt.liveness == Liveness::Dead {
+            return SatmapStatus::Panic;
+        }
         *written = 0;
         if buf.is_null() {
             return SatmapStatus::NullArgument;
@@ -295,11 +329,7 @@ pub unsafe extern "C" fn satmap_recalibrate(
     rt: *mut SatmapRuntime,
     calibration_toml: *const c_char,
 ) -> SatmapStatus {
-    guard(|| {
-        // SAFETY: NULL or from satmap_create.
-        let Some(rt) = (unsafe { rt.as_mut() }) else {
-            return SatmapStatus::NullArgument;
-        };
+    with_runtime(rt, |rt| {
         let path = match path_of(calibration_toml) {
             Ok(p) => p,
             Err(e) => return e,
@@ -312,6 +342,22 @@ pub unsafe extern "C" fn satmap_recalibrate(
             Ok(()) => SatmapStatus::Ok,
             Err(e) => rt.fail(SatmapStatus::Calibration, &e),
         }
+    })
+}
+
+/// Restart the runtime's frame counters and drop a staged step in progress (`SatMap::reset`):
+/// the next frame is accepted whatever its sequence and timestamp, and no map is published
+/// until it steps. For a genuine restart of the caller's counters, or to leave a state the
+/// frame checks refuse. Calibration, bundle and regions are kept. A dead handle (an earlier
+/// `SATMAP_STATUS_PANIC`) answers `SATMAP_STATUS_PANIC`: it can only be destroyed.
+///
+/// # Safety
+/// `rt` from `satmap_create`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn satmap_reset(rt: *mut SatmapRuntime) -> SatmapStatus {
+    with_runtime(rt, |rt| {
+        rt.map.reset();
+        SatmapStatus::Ok
     })
 }
 

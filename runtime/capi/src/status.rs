@@ -49,7 +49,9 @@ pub enum SatmapStatus {
     CrcMismatch = 18,
     /// A serialised map frame's length, data id or a field is wrong.
     WireInvalid = 19,
-    /// A Rust panic was caught at the boundary (a runtime bug): destroy the runtime.
+    /// A Rust panic was caught at the boundary (a runtime bug, never bad input): the handle is
+    /// dead from then on (every call but `satmap_last_error` and `satmap_destroy` answers this
+    /// status); destroy it and create another.
     Panic = 20,
     /// Two caller regions share bytes (or one wraps past the end of the address space); nothing
     /// was created. Each region must be its own memory.
@@ -61,6 +63,10 @@ pub enum SatmapStatus {
     BundleSignature = 23,
     /// `SATMAP_TRUST_PINNED` and the bundle's digest is another; nothing was parsed.
     BundleNotPinned = 24,
+    /// The GKT look-up table in the caller's `gkt_lut` region changed since it was built (a
+    /// stray write); nothing was published. Every step answers this until
+    /// `satmap_recalibrate` builds the table again.
+    LutCorrupt = 25,
 }
 
 impl From<&BundleError> for SatmapStatus {
@@ -98,6 +104,7 @@ impl From<&StepError> for SatmapStatus {
             StepError::FrameMismatch { .. } | StepError::FrameChanged { .. } => Self::FrameMismatch,
             StepError::Engine(_) | StepError::Kernel(_) => Self::Engine,
             StepError::NonFiniteOutput { .. } => Self::NonFiniteOutput,
+            StepError::LutCorrupt { .. } => Self::LutCorrupt,
             _ => Self::FrameRejected,
         }
     }

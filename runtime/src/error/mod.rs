@@ -267,6 +267,15 @@ pub enum StepError {
         /// What differs.
         part: FramePart,
     },
+    /// The GKT look-up table (in caller memory) no longer has the digest it was built with:
+    /// something wrote into the `gkt_lut` region. Every step fails so until
+    /// [`crate::SatMap::recalibrate`] builds it again.
+    LutCorrupt {
+        /// Digest at build time.
+        built: u64,
+        /// Digest now.
+        found: u64,
+    },
 }
 
 impl fmt::Display for StepError {
@@ -384,6 +393,11 @@ impl fmt::Display for StepError {
             Self::FrameChanged { sequence, part } => write!(
                 f,
                 "staged step of frame {sequence}: {part:?} differs from what step_begin checked"
+            ),
+            Self::LutCorrupt { built, found } => write!(
+                f,
+                "the GKT look-up table changed since it was built (xxh3 {built:016x}, now \
+                 {found:016x}): recalibrate"
             ),
         }
     }

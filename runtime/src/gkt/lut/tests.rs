@@ -140,3 +140,25 @@ fn rebuild_reuses_storage_and_matches_fresh_build() {
     ));
     assert_eq!(lut.to_dense(), before);
 }
+
+#[test]
+fn the_digest_covers_every_array_the_gather_reads() {
+    let mut lut = Lut::new(
+        &ModelDims::test_config(),
+        &crate::test_support::nuscenes_like(),
+    )
+    .unwrap();
+    assert_eq!(lut.verify(), Ok(()));
+    let built = lut.digest();
+    lut.queries[0] ^= 1;
+    assert_ne!(lut.digest(), built);
+    lut.queries[0] ^= 1;
+    lut.count[0] ^= 1;
+    assert_ne!(lut.digest(), built);
+    lut.count[0] ^= 1;
+    lut.camera_start[3] += 1;
+    assert!(matches!(
+        lut.verify(),
+        Err(crate::error::StepError::LutCorrupt { .. })
+    ));
+}
