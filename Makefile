@@ -2,14 +2,16 @@
 #   make demo   a simulated drive with the default embedded model: latency/memory report + picture
 #   make test   the whole test suite (Rust and Python, the host and the ECU targets under
 #               emulation); .ci/run calls it
-# Commands a person runs, never CI: make train (the trained default model), make fuzz (1.35M inputs).
+# Commands a person runs, never CI: make train (the trained default model), make fuzz (the
+# libFuzzer campaign), make fuzz-parsers (1.65M generated inputs).
 # Everything they need is installed by the targets themselves.
 
 PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz bench-peers \
+.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz fuzz-ci \
+  fuzz-parsers bench-peers \
   cross-toolchain test-aarch64 test-baremetal test-targets insn-counts
 
 # The demo runs the binary `make test` builds (the same cargo command, so the dependency tree is
@@ -30,7 +32,7 @@ test:
 	@{ $(MAKE) --no-print-directory venv > out/venv.log 2>&1; echo $$? > out/venv.rc; } & \
 	  { $(MAKE) --no-print-directory cross-toolchain > out/cross-toolchain.log 2>&1; \
 	    echo $$? > out/cross-toolchain.rc; } & \
-	  $(MAKE) --no-print-directory lint nostd test-rust test-c; rust=$$?; wait; \
+	  $(MAKE) --no-print-directory lint nostd test-rust test-c fuzz-ci; rust=$$?; wait; \
 	  echo "--- make venv (run beside the Rust steps):"; cat out/venv.log; \
 	  echo "--- make cross-toolchain (run beside the Rust steps):"; cat out/cross-toolchain.log; \
 	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0 && test "$$(cat out/cross-toolchain.rc)" -eq 0
@@ -39,6 +41,7 @@ test:
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --exclude satmap-nostd-check --all-targets -- -D warnings
+	cd fuzz && $(CARGO) fmt -- --check && $(CARGO) clippy --all-targets -- -D warnings
 
 # Links the no_std core into a staticlib with its own panic handler: fails if std sneaks in.
 # Built on its own (a workspace-wide build unifies in the host crates' `std` features) and with
@@ -49,16 +52,27 @@ nostd:
 test-rust:
 	$(CARGO) test --workspace --exclude satmap-nostd-check
 
-# The fuzz campaign (never run in CI; CI runs the same file at 256 cases per parser): 11 parsers x
+# Coverage-guided fuzzing (cargo fuzz, libFuzzer) of the runtime's parsers: 7 targets under fuzz/
+# (archive, signed bundle, NNEF stage and text, map frame, route pack, manifest), each
+# FUZZ_SECONDS on a corpus kept in target/fuzz-corpus/ (a campaign resumes) seeded from
+# fuzz/seeds/; one line per target: execs, edges covered, corpus, crashes. fuzz-ci is CI's
+# slice (5 s a target, after a ~2 min cargo-fuzz install and a ~1 min build).
+FUZZ_SECONDS ?= 300
+fuzz:
+	bash fuzz/run.sh $(FUZZ_SECONDS)
+fuzz-ci:
+	bash fuzz/run.sh 5
+
+# The generated-input campaign (never run in CI; CI runs the same file at 256 cases per parser): 11 parsers x
 # FUZZ_CASES inputs (1,650,000 by default) through tests/fuzz_parsers/, one line per parser
 # ("inputs run: N ... panics found: 0"), then the total; ~6 min on 2 cores. The test profile, not
 # --release: opt-level 3 with debug assertions and overflow checks, which catch more.
 # FUZZ_SEED=<u64> repeats a run. See ARCHITECTURE.md "Fuzzing".
 FUZZ_CASES ?= 150000
 FUZZ_SEED ?= random
-fuzz: SHELL := /bin/bash
-fuzz: .SHELLFLAGS := -o pipefail -c
-fuzz:
+fuzz-parsers: SHELL := /bin/bash
+fuzz-parsers: .SHELLFLAGS := -o pipefail -c
+fuzz-parsers:
 	mkdir -p out
 	SATMAP_FUZZ_CASES=$(FUZZ_CASES) SATMAP_FUZZ_SEED=$(FUZZ_SEED) \
 	  $(CARGO) test --test fuzz_parsers -- --nocapture 2>&1 | tee out/fuzz.log

@@ -20,7 +20,7 @@
 //!
 //! `SATMAP_FUZZ_CASES` is the number of cases per parser (default 256, the CI slice);
 //! `SATMAP_FUZZ_SEED` the RNG seed (a number, or `random`; default fixed so CI repeats itself).
-//! `make fuzz` is the 1,350,000-input campaign (`ARCHITECTURE.md`, "Fuzzing"). Every parser
+//! `make fuzz-parsers` is the 1,650,000-input campaign (`ARCHITECTURE.md`, "Fuzzing"). Every parser
 //! prints one `fuzz <parser>: inputs run: N ... panics found: 0` line to stderr when it completes.
 //!
 //! Layout: `runner` (case count and seed, the `fuzz` loop, the summary line, the failure file),
@@ -30,6 +30,7 @@
 mod calibration;
 mod compiled_bundle;
 mod geojson_route;
+mod libfuzzer_seeds;
 mod manifest;
 mod maptr_json;
 mod memory_layout;

@@ -19,13 +19,13 @@ use crate::mutate::inputs;
 use crate::runner::Outcome::{Accepted, Parsed, Refused};
 use crate::runner::{CaseResult, Input, assert_seeds_accepted, fuzz};
 
-struct Signed {
-    archive: Vec<u8>,
-    signature: BundleSignature,
+pub(crate) struct Signed {
+    pub(crate) archive: Vec<u8>,
+    pub(crate) signature: BundleSignature,
     key: BundlePublicKey,
 }
 
-fn signed_seed() -> Signed {
+pub(crate) fn signed_seed() -> Signed {
     let archive = reseal(seed_manifest().as_bytes());
     let secret = SigningKey::from_bytes(&[0x5a; 32]);
     let key = BundlePublicKey::from_bytes(&secret.verifying_key().to_bytes()).unwrap();

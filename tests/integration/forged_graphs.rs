@@ -6,8 +6,9 @@
 //! the step that reads past it, after which the engine still runs.
 //!
 //! What still reaches tract (passes the structural check): an axis inside rank 8 but past the
-//! tensor's own rank (`sum_reduce` axis 7, `transpose` axes out of range), and tables that are
-//! only wrong for the values a step brings. tract errors or panics on those; both are caught.
+//! tensor's own rank (`sum_reduce` axis 7, `concat` axis 6), and tables that are only wrong for
+//! the values a step brings. tract errors or panics on those; both are caught. A transpose that
+//! is no permutation (`[5, 0, 2]`, `[2, 0, 2]`) no longer reaches it.
 
 use std::io::Read as _;
 
@@ -161,6 +162,12 @@ fn forged_graph_texts_are_refused_before_tract() {
             "repeats = [1, 1, 100000]".into(),
         ),
         (
+            "transpose past the rank",
+            bq,
+            "axes = [1, 0, 2]",
+            "axes = [5, 0, 2]".into(),
+        ),
+        (
             "unknown operator",
             bq,
             "= squeeze(",
@@ -239,7 +246,7 @@ fn what_reaches_tract_is_confined_to_an_error() {
             "sum_reduce(__Add, axes = [1])",
             "sum_reduce(__Add, axes = [7])",
         ),
-        (Stage::BevQuery, "axes = [1, 0, 2]", "axes = [5, 0, 2]"),
+        (Stage::BevQuery, "axis = 2);", "axis = 6);"),
     ] {
         let e = load_refused(stage, forge_text(stage, from, to));
         assert!(matches!(e, BundleError::Engine { .. }), "{e}");

@@ -39,3 +39,19 @@ fn a_replay_has_the_same_step_digests_on_one_and_two_threads() {
     assert!(one.1.windows(2).all(|w| w[0] != w[1]), "{:?}", one.1);
     assert_eq!(one, two);
 }
+
+/// More engine threads than `MAX_ENGINE_THREADS` are refused with the limit named (a million
+/// aborted the process inside rayon), and the engine keeps its setting and runs.
+#[test]
+fn too_many_engine_threads_are_refused_and_the_engine_goes_on() {
+    use satmap_runtime::engine_tract::MAX_ENGINE_THREADS;
+    let mut engine = common::compiled_engine();
+    engine.set_threads(TWO).unwrap();
+    for n in [MAX_ENGINE_THREADS + 1, 1_000_000] {
+        let e = engine
+            .set_threads(NonZeroUsize::new(n).unwrap())
+            .unwrap_err();
+        assert!(e.to_string().contains("at most 64"), "{e}");
+    }
+    assert_eq!(engine.threads(), TWO);
+}

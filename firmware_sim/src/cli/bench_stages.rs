@@ -10,18 +10,19 @@ use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use glam::{DVec2, Vec3};
 use safetensors::SafeTensors;
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine::{Engine, Stage};
-use satmap_runtime::engine_tract::{Rewrites, TractEngine, kernel_family};
+use satmap_runtime::engine_tract::{MAX_ENGINE_THREADS, Rewrites, TractEngine, kernel_family};
 use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::satellite::FixedCrop;
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
 use serde::Serialize;
 
 use crate::cli::check_bundle::reference_f32s;
+use crate::cli::drive::BadArgument;
 
 /// Arguments of `bench-stages`.
 #[derive(clap::Args, Debug)]
@@ -176,13 +177,27 @@ fn time_ms(repeats: usize, mut run: impl FnMut() -> Result<()>) -> Result<Vec<f6
         .collect()
 }
 
+/// Most timed runs per stage (a minute of the slowest stage on this machine is well below it).
+pub const MAX_REPEATS: usize = 10_000;
+
 /// Time the stages and the step.
 ///
 /// # Errors
 /// The bundle or its reference unreadable, a stage failing, or no repeats asked for.
 pub fn measure(args: &Args) -> Result<StageTimes> {
-    if args.repeats == 0 {
-        bail!("--repeats must be at least 1");
+    if !(1..=MAX_REPEATS).contains(&args.repeats) {
+        return Err(BadArgument(format!(
+            "--repeats must be in 1..={MAX_REPEATS}, got {}",
+            args.repeats
+        ))
+        .into());
+    }
+    if args.threads.get() > MAX_ENGINE_THREADS {
+        return Err(BadArgument(format!(
+            "--threads must be in 1..={MAX_ENGINE_THREADS}, got {}",
+            args.threads
+        ))
+        .into());
     }
     let mut engine = TractEngine::open(&args.bundle)?;
     engine.set_threads(args.threads)?;

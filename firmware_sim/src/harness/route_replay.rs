@@ -116,6 +116,10 @@ pub(super) fn tile_buffer(pack: &RoutePack<'_>) -> Vec<u8> {
     vec![0u8; bytes]
 }
 
+/// Slowest replay speed, m/s (walking pace / 10): below it a route of any length needs more
+/// steps than a replay may run.
+pub const MIN_SPEED_MPS: f64 = 0.1;
+
 /// Drive along `pack_bytes`'s route and time every crop.
 ///
 /// # Errors
@@ -124,9 +128,10 @@ pub fn replay_route(
     pack_bytes: &[u8],
     cfg: &RouteReplayConfig,
 ) -> Result<RouteReplayReport, HarnessError> {
-    if !(cfg.speed_mps > 0.0 && cfg.speed_mps < 100.0) {
+    // A floor, not just > 0: 1e-308 m/s made the step count overflow (issue 38).
+    if !(MIN_SPEED_MPS..100.0).contains(&cfg.speed_mps) {
         return Err(HarnessError::Settings(format!(
-            "speed must be in (0, 100) m/s (got {:?})",
+            "speed must be in [{MIN_SPEED_MPS}, 100) m/s (got {:?})",
             cfg.speed_mps
         )));
     }
@@ -151,7 +156,10 @@ pub fn replay_route(
         .check_crop_spec(&cfg.crop)
         .map_err(|f| HarnessError::Pack(format!("its tiles cannot serve the crop ({f:?})")))?;
     let step_m = cfg.speed_mps / cfg.rate_hz;
-    let steps = ((total_m / step_m).floor() as usize + 1).min(cfg.max_steps);
+    // `as` saturates; the add must too.
+    let steps = ((total_m / step_m).floor() as usize)
+        .saturating_add(1)
+        .min(cfg.max_steps);
     let mut crop = vec![0u8; cfg.crop.height_px * cfg.crop.width_px * 3];
     let (mut all, mut with, mut without) = (
         Series::with_capacity(steps),

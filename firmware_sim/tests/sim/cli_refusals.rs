@@ -295,3 +295,23 @@ fn synth_drive_settings_that_hung_are_refused_before_any_work() {
     }
     assert!(!out.join("scenario.toml").exists());
 }
+
+/// `bench-stages --threads 1000000` aborted the process and `--repeats 1000000` ran unbounded:
+/// both are refused as bad input before the bundle is loaded.
+#[test]
+fn bench_stages_bounds_threads_and_repeats() {
+    for (flag, value) in [
+        ("--threads", "1000000"),
+        ("--threads", "65"),
+        ("--repeats", "1000000"),
+        ("--repeats", "0"),
+    ] {
+        let (code, _, err) = run(&["bench-stages", "--bundle", bundle(), flag, value]);
+        assert_eq!(
+            code,
+            Some(i32::from(EXIT_BAD_INPUT)),
+            "{flag} {value}: {err}"
+        );
+        assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+}

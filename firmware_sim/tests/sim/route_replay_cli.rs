@@ -55,6 +55,21 @@ fn a_synthetic_jpeg_pack_is_built_and_replayed_along_its_whole_route() {
     let report: serde_json::Value = serde_json::from_str(&out).unwrap();
     // 2 km at 2 m a step.
     assert_eq!(report["steps"], 1001, "{report}");
+    // 1e-308 m/s panicked (the step count overflowed); every speed below 0.1 m/s is refused.
+    for speed in ["1e-308", "0.05", "0", "nan", "100"] {
+        let (code, _, err) = run(&[
+            "drive",
+            "--bundle",
+            BUNDLE,
+            "--satellite-only",
+            pack,
+            "--speed-mps",
+            speed,
+        ]);
+        assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{speed}: {err}");
+        // The CLI's own range ([0, 60)) or the replay's floor (0.1 m/s) names the speed.
+        assert!(err.contains("speed"), "{speed}: {err}");
+    }
     assert_eq!(report["codec"], "jpeg");
     assert_eq!(report["not_full_steps"], 0, "{report}");
     assert!(report["decoded_tiles"].as_u64().unwrap() > 0);

@@ -269,6 +269,10 @@ pub struct TractEngine {
     threads: NonZeroUsize,
 }
 
+/// Most threads [`TractEngine::set_threads`] starts (more than any ECU or host core count
+/// this runtime targets).
+pub const MAX_ENGINE_THREADS: usize = 64;
+
 /// The engine's thread pool could not be started (the OS refused a thread).
 #[derive(Debug, thiserror::Error)]
 #[error("cannot start a pool of {threads} engine threads: {reason}")]
@@ -342,6 +346,13 @@ impl TractEngine {
     /// # Errors
     /// [`ThreadPoolError`] when the operating system refuses a thread.
     pub fn set_threads(&mut self, threads: NonZeroUsize) -> Result<(), ThreadPoolError> {
+        // A million threads aborted the process inside rayon (issue 38): refused, named.
+        if threads.get() > MAX_ENGINE_THREADS {
+            return Err(ThreadPoolError {
+                threads: threads.get(),
+                reason: format!("at most {MAX_ENGINE_THREADS} engine threads"),
+            });
+        }
         self.executor = if threads.get() == 1 {
             Executor::SingleThread
         } else {
