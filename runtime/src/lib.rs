@@ -22,6 +22,8 @@ pub mod error;
 pub mod frame;
 pub mod geo;
 pub mod gkt;
+#[cfg(feature = "std")]
+pub mod host_files;
 pub mod map_frame;
 pub mod model_dims;
 pub mod placement;

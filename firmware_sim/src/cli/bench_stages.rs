@@ -104,7 +104,11 @@ impl ReferenceInputs {
         } else {
             bundle.with_extension("").join("reference.safetensors")
         };
-        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        let bytes = satmap_runtime::host_files::read_capped(
+            &path,
+            satmap_runtime::host_files::MAX_DATA_BYTES,
+        )
+        .with_context(|| format!("reading {}", path.display()))?;
         let st = SafeTensors::deserialize(&bytes).with_context(|| path.display().to_string())?;
         let raw = |name: &str| -> Result<Vec<u8>> {
             Ok(st

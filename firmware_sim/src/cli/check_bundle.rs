@@ -185,10 +185,12 @@ pub fn check_dir(dir: &Path, trust: &Trust) -> Result<f32, CheckError> {
         path: path.clone(),
         message,
     };
-    let bytes = std::fs::read(&path).map_err(|e| CheckError::ReferenceUnreadable {
-        path: path.clone(),
-        message: e.to_string(),
-    })?;
+    let bytes =
+        satmap_runtime::host_files::read_capped(&path, satmap_runtime::host_files::MAX_DATA_BYTES)
+            .map_err(|e| CheckError::ReferenceUnreadable {
+                path: path.clone(),
+                message: e.to_string(),
+            })?;
     let reference = SafeTensors::deserialize(&bytes)
         .map_err(|e| corrupt(format!("not a safetensors file ({e})")))?;
     // Before the (slow) graph load: a damaged reference says nothing about tract.

@@ -281,8 +281,11 @@ fn print_deviation(
 fn run_satellite_only(args: &Args, pack_path: &Path, rate_hz: f64) -> Result<()> {
     let bundle = satmap_runtime::bundle::Bundle::open(&args.bundle)
         .map_err(|e| BadArgument(format!("{}: {e}", args.bundle.display())))?;
-    let pack = std::fs::read(pack_path)
-        .map_err(|e| BadArgument(format!("{}: {e}", pack_path.display())))?;
+    let pack = satmap_runtime::host_files::read_capped(
+        pack_path,
+        satmap_runtime::host_files::MAX_DATA_BYTES,
+    )
+    .map_err(|e| BadArgument(format!("{}: {e}", pack_path.display())))?;
     let cfg = RouteReplayConfig {
         crop: args.crop.unwrap_or_else(|| bundle.dims().crop_spec()),
         speed_mps: args.speed_mps,

@@ -33,7 +33,11 @@ pub fn built_in_layout_line() -> String {
 /// An unreadable file or an invalid layout.
 pub fn read_layout(path: Option<&Path>) -> Result<MemoryLayout> {
     let text = match path {
-        Some(p) => std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
+        Some(p) => satmap_runtime::host_files::read_text_capped(
+            p,
+            satmap_runtime::host_files::MAX_CONFIG_BYTES,
+        )
+        .with_context(|| p.display().to_string())?,
         None => BUILT_IN_LAYOUT.to_owned(),
     };
     MemoryLayout::parse(&text).with_context(|| match path {

@@ -80,7 +80,11 @@ pub struct LoadedFile {
 
 /// Read a results or ground-truth file in any of the three layouts; every error names `path`.
 pub fn read_file(path: &Path) -> Result<LoadedFile, ResultsFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ResultsFileError::Io {
+    let text = satmap_runtime::host_files::read_text_capped(
+        path,
+        satmap_runtime::host_files::MAX_DATA_BYTES,
+    )
+    .map_err(|source| ResultsFileError::Io {
         path: path.to_owned(),
         source,
     })?;

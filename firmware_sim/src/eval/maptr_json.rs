@@ -102,7 +102,8 @@ pub struct ResultsFile {
     /// Free-form metadata (MapTR writes the modalities used).
     #[serde(default)]
     pub meta: serde_json::Value,
-    /// Per sample token.
+    /// Per sample token (a token given twice is refused, not last-wins).
+    #[serde(deserialize_with = "super::strict_json::unique_keys")]
     pub results: BTreeMap<String, SampleRecord>,
 }
 
@@ -128,8 +129,12 @@ pub struct VectorRecord {
     /// Label index (MapTR's `type`, the field its evaluator selects classes by).
     #[serde(rename = "type", default, skip_serializing_if = "Option::is_none")]
     pub label: Option<i64>,
-    /// Score; absent in ground truth.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Score; absent in ground truth (`null` is refused: it was scored 1.0).
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "super::strict_json::number_if_present"
+    )]
     pub confidence_level: Option<f64>,
 }
 
@@ -162,7 +167,11 @@ impl ResultsFile {
 
     /// Read a file in our layout only (`eval::read_file` takes MapTR's layouts too).
     pub fn read(path: &Path) -> Result<Self, ResultsFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ResultsFileError::Io {
+        let text = satmap_runtime::host_files::read_text_capped(
+            path,
+            satmap_runtime::host_files::MAX_DATA_BYTES,
+        )
+        .map_err(|source| ResultsFileError::Io {
             path: path.to_owned(),
             source,
         })?;

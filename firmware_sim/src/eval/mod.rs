@@ -11,6 +11,8 @@
 //! - `deviation`: one replay's maps against another's (lower precision against f32).
 //! - `maptr_files`: MapTR's `{"results": [...]}` and `{"GTs": [...]}` files; the reader of all
 //!   three layouts.
+//! - `strict_json`: what serde would accept silently and the evaluator refuses (a token twice in
+//!   one object, a `null` score).
 
 pub mod average_precision;
 pub mod buffer;
@@ -19,6 +21,7 @@ pub mod deviation;
 pub mod map_vector;
 pub mod maptr_files;
 pub mod maptr_json;
+pub mod strict_json;
 
 pub use average_precision::{
     ClassAp, DEFAULT_THRESHOLDS_M, EvalReport, SampleSet, evaluate, evaluate_at,

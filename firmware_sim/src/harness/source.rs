@@ -142,11 +142,18 @@ pub(super) fn open_scenario(
             );
             let bytes = if let Some(p) = &s.manifest.route_pack {
                 let path = dir.join(p);
-                std::fs::read(&path).map_err(|e| pack(&format!("{}: {e}", path.display())))?
+                satmap_runtime::host_files::read_capped(
+                    &path,
+                    satmap_runtime::host_files::MAX_DATA_BYTES,
+                )
+                .map_err(|e| pack(&format!("{}: {e}", path.display())))?
             } else {
                 let route_path = dir.join(&s.manifest.route_geojson);
-                let text = std::fs::read_to_string(&route_path)
-                    .map_err(|e| pack(&format!("{}: {e}", route_path.display())))?;
+                let text = satmap_runtime::host_files::read_text_capped(
+                    &route_path,
+                    satmap_runtime::host_files::MAX_DATA_BYTES,
+                )
+                .map_err(|e| pack(&format!("{}: {e}", route_path.display())))?;
                 let route = parse_route_geojson(&text, &route_path).map_err(|e| pack(&e))?;
                 let mut tiles =
                     SlippyTiles::open(&dir.join(&s.manifest.tiles_dir), Some(s.manifest.tile_zoom))

@@ -320,7 +320,11 @@ impl WorldFileImage {
                         .into(),
                 })?,
         };
-        let text = std::fs::read_to_string(&world).map_err(|source| BuildError::Io {
+        let text = satmap_runtime::host_files::read_text_capped(
+            &world,
+            satmap_runtime::host_files::MAX_CONFIG_BYTES,
+        )
+        .map_err(|source| BuildError::Io {
             path: world.clone(),
             source,
         })?;

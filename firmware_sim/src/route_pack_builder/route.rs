@@ -15,7 +15,11 @@ use super::error::BuildError;
 /// Unreadable file, invalid GeoJSON, no LineString, fewer than two points, or a position out of
 /// range.
 pub fn read_route_geojson(path: &Path) -> Result<Vec<Geodetic>, BuildError> {
-    let text = std::fs::read_to_string(path).map_err(|source| BuildError::Io {
+    let text = satmap_runtime::host_files::read_text_capped(
+        path,
+        satmap_runtime::host_files::MAX_DATA_BYTES,
+    )
+    .map_err(|source| BuildError::Io {
         path: path.to_owned(),
         source,
     })?;

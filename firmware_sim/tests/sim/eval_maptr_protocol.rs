@@ -331,7 +331,7 @@ fn type_alone_names_the_class_and_must_agree_with_cls_name() {
 #[test]
 fn malformed_files_give_errors_naming_the_file() {
     let dir = scratch("malformed");
-    let cases: [(&str, &str, &str); 8] = [
+    let cases: [(&str, &str, &str); 10] = [
         (
             "truncated.json",
             r#"{"results": [{"sample_token": "#,
@@ -353,6 +353,18 @@ fn malformed_files_give_errors_naming_the_file() {
             "dup.json",
             r#"{"GTs": [{"sample_token": "t", "vectors": []}, {"sample_token": "t", "vectors": []}]}"#,
             "sample_token \"t\" appears more than once",
+        ),
+        // Our object layout: serde kept the last of two equal keys.
+        (
+            "dup_object.json",
+            r#"{"results": {"t": {"vectors": []}, "t": {"vectors": []}}}"#,
+            "sample_token \"t\" appears more than once",
+        ),
+        // A null score was read as absent and scored 1.0.
+        (
+            "null_score.json",
+            r#"{"results": {"t": {"vectors": [{"pts": [[0, 0], [1, 1]], "cls_name": "divider", "confidence_level": null}]}}}"#,
+            "confidence_level is null",
         ),
         (
             "three_coords.json",

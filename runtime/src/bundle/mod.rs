@@ -326,9 +326,11 @@ fn read_signature(path: &Path) -> Result<BundleSignature, BundleError> {
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, BundleError> {
-    std::fs::read(path).map_err(|source| BundleError::Io {
-        path: path.to_path_buf(),
-        source,
+    crate::host_files::read_capped(path, crate::host_files::MAX_DATA_BYTES).map_err(|source| {
+        BundleError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }
 

@@ -143,10 +143,11 @@ pub fn from_toml_str(text: &str) -> Result<Calibration, CalibrationFileError> {
 /// # Errors
 /// [`CalibrationFileError::Io`] when the file cannot be read, else as [`from_toml_str`].
 pub fn from_toml_file(path: &Path) -> Result<Calibration, CalibrationFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::host_files::read_text_capped(path, crate::host_files::MAX_CONFIG_BYTES)
+        .map_err(|source| CalibrationFileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
     from_toml_str(&text)
 }
 
