@@ -315,3 +315,62 @@ fn bench_stages_bounds_threads_and_repeats() {
         assert!(err.contains(flag), "{flag} {value}: {err}");
     }
 }
+
+/// `scenario.toml` paths that leave the scenario folder (`..`, absolute) are refused by name
+/// before anything they point at is read; a calibration given as `/dev/zero` or a results file
+/// given as a named pipe is refused unread (it ran to the memory cap, or blocked).
+#[test]
+fn scenario_paths_stay_inside_and_devices_and_pipes_are_never_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("s");
+    write_scenario(&seven(), &scenario, &ScenarioPlacement::default(), |_| {}).unwrap();
+    let manifest = std::fs::read_to_string(scenario.join("scenario.toml")).unwrap();
+    for (field, bad) in [
+        ("calibration_file", "../../../etc/passwd"),
+        ("ground_truth_json", "/etc/passwd"),
+        ("tiles_dir", "tiles/../../x"),
+    ] {
+        let line = manifest
+            .lines()
+            .find(|l| l.starts_with(&format!("{field} = ")))
+            .unwrap();
+        let edited = manifest.replace(line, &format!("{field} = {bad:?}"));
+        std::fs::write(scenario.join("scenario.toml"), edited).unwrap();
+        let (code, _, err) = drive_scenario(&scenario, "--json");
+        assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{field}: {err}");
+        assert!(
+            err.contains(&format!("`{field}` is not a path inside")),
+            "{err}"
+        );
+    }
+    std::fs::write(scenario.join("scenario.toml"), &manifest).unwrap();
+
+    let fifo = dir.path().join("results.fifo");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    for (args, what) in [
+        (
+            vec!["memory-map", "--layout", "/dev/zero"],
+            "not a regular file",
+        ),
+        (
+            vec![
+                "evaluate",
+                "--predictions",
+                fifo.to_str().unwrap(),
+                "--gt",
+                fifo.to_str().unwrap(),
+            ],
+            "not a regular file",
+        ),
+    ] {
+        let (code, _, err) = run(&args);
+        assert_ne!(code, Some(0), "{args:?}: {err}");
+        assert!(err.contains(what), "{args:?}: {err}");
+    }
+}
