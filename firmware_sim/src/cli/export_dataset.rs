@@ -16,7 +16,7 @@
 //! of, at the true pose: the registration error and staleness live in the imagery, as they
 //! would on a car. A drive whose `.json` exists is skipped, so an interrupted export resumes.
 
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -27,6 +27,7 @@ use satmap_runtime::can_bus::can_bus;
 use satmap_runtime::satellite::SatelliteSource;
 use serde::Serialize;
 
+use crate::cli::drive::BadArgument;
 use crate::cli::render::satmap_crop_spec;
 use crate::synth::drive::{DriveConfig, SyntheticDrive};
 use crate::synth::imagery::ImageryConfig;
@@ -112,7 +113,8 @@ pub struct Args {
 struct Index<'a> {
     format: &'static str,
     config: &'static str,
-    splits: HashMap<&'static str, Vec<u64>>,
+    /// Seeds per split, in name order (a HashMap wrote them in a new order every run).
+    splits: BTreeMap<&'static str, Vec<u64>>,
     knobs: Knobs<'a>,
 }
 
@@ -162,6 +164,38 @@ struct VectorRecord {
 #[must_use]
 pub fn frame_token(seed: u64, index: usize) -> String {
     format!("s{seed:05}_f{index:06}")
+}
+
+/// An export resumed into a folder that already holds one must use its format, config and
+/// knobs: drives on disk are skipped, so other knobs would leave an `index.json` describing
+/// data it does not hold (issue 38: it exited 0 so). The seed splits may grow.
+///
+/// # Errors
+/// [`BadArgument`] naming the first field that differs; the old index unreadable.
+fn check_resume(path: &Path, fresh: &serde_json::Value) -> Result<()> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let text = satmap_runtime::host_files::read_text_capped(
+        path,
+        satmap_runtime::host_files::MAX_CONFIG_BYTES,
+    )
+    .with_context(|| path.display().to_string())?;
+    let old: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| path.display().to_string())?;
+    for key in ["format", "config", "knobs"] {
+        if old.get(key) != fresh.get(key) {
+            return Err(BadArgument(format!(
+                "{}: this folder holds a dataset made with other {key} ({} there, {} now); \
+                 resume only with the same settings, or choose another --out",
+                path.display(),
+                old.get(key).unwrap_or(&serde_json::Value::Null),
+                fresh.get(key).unwrap_or(&serde_json::Value::Null)
+            ))
+            .into());
+        }
+    }
+    Ok(())
 }
 
 /// Write the dataset.
@@ -220,6 +254,7 @@ pub fn run(args: &Args) -> Result<()> {
         },
     };
     let path = args.out.join("index.json");
+    check_resume(&path, &serde_json::to_value(&index)?)?;
     std::fs::write(&path, serde_json::to_string_pretty(&index)?)
         .with_context(|| path.display().to_string())?;
 

@@ -112,6 +112,29 @@ fn export_writes_the_dataset_layout_and_refuses_overlapping_splits() {
     let overlapping = run(&args("19..21")).unwrap_err().to_string();
     assert!(overlapping.contains("overlap"), "{overlapping}");
     run(&args("10..12")).unwrap();
+    // Resumed with the same knobs: the drives on disk are kept; with other knobs: refused, the
+    // index untouched (it exited 0 and rewrote the index for data it did not describe).
+    let written = std::fs::read_to_string(dir.join("index.json")).unwrap();
+    run(&args("10..12")).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(dir.join("index.json")).unwrap(),
+        written
+    );
+    let other = Args {
+        frames: 3,
+        ..args("10..12")
+    };
+    let e = run(&other).unwrap_err();
+    assert!(
+        e.downcast_ref::<satmap_sim::cli::drive::BadArgument>()
+            .is_some(),
+        "{e:#}"
+    );
+    assert!(e.to_string().contains("other knobs"), "{e}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("index.json")).unwrap(),
+        written
+    );
 
     let index: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("index.json")).unwrap()).unwrap();
