@@ -100,8 +100,15 @@ fn entries(bytes: &[u8]) -> Result<Vec<RawEntry>, BundleError> {
 
 impl Archive {
     /// Verify `bytes` as a compiled bundle (see the module doc) and return it with its parsed
-    /// manifest; errors name entries as `path/<entry>`.
-    pub fn parse(path: &Path, bytes: Vec<u8>) -> Result<(Self, Manifest), BundleError> {
+    /// manifest; errors name entries as `path/<entry>`. `canonical_prefix_digest` is the SHA-256
+    /// of the bytes before the canonical trailer ([`super::archive_digest_unparsed`], already
+    /// taken to decide trust): the whole-file digest is that one whenever the digest entry sits
+    /// where the canonical form puts it, so the archive is not hashed a second time.
+    pub fn parse(
+        path: &Path,
+        bytes: Vec<u8>,
+        canonical_prefix_digest: Sha256Digest,
+    ) -> Result<(Self, Manifest), BundleError> {
         let entries = entries(&bytes)?;
         let expected_count = Stage::ALL.len() + 2;
         if entries.len() != expected_count {
@@ -158,7 +165,11 @@ impl Archive {
         }
         let recorded =
             parse_digest_file(path.join(ARCHIVE_DIGEST_ENTRY), &bytes[last.data.clone()])?;
-        let digest = Sha256Digest::of(&bytes[..last.header_at]);
+        let digest = if last.header_at + super::signature::ARCHIVE_TRAILER_BYTES == bytes.len() {
+            canonical_prefix_digest
+        } else {
+            Sha256Digest::of(&bytes[..last.header_at])
+        };
         if digest != recorded {
             return Err(BundleError::ArchiveDigest {
                 path: path.to_path_buf(),
