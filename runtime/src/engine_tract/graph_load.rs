@@ -79,15 +79,7 @@ pub(crate) fn nnef_model(
     use tract_nnef::tract_core::floats::FloatPrecisionTranslator;
     use tract_nnef::tract_core::transform::ModelTransform as _;
     let engine_err = engine_error(stage);
-    let refused = |source| BundleError::Graph {
-        stage: stage.name(),
-        source,
-    };
-    check_nnef_stage(bytes).map_err(refused)?;
-    let model = nnef.model_for_read(&mut &bytes[..]).map_err(engine_err)?;
-    // Before decluttering folds constants (the step where a huge `tile` or reshape would be
-    // materialised): every tensor of the parsed graph has a static size within the limit.
-    check_tensor_sizes(&model).map_err(refused)?;
+    let model = checked_model(stage, nnef, bytes)?;
     check_io_names(stage, &graph_io_names(&model)?, entry)?;
     if precision != Precision::F16 {
         return Ok((model, None));
@@ -118,19 +110,34 @@ pub(crate) fn nnef_model(
 /// [`BundleError::Graph`] for a rule broken, [`BundleError::Engine`] for tract's refusal or
 /// panic.
 pub fn parse_stage_graph(stage: Stage, bytes: &[u8]) -> Result<(), BundleError> {
+    confined(stage, || {
+        checked_model(stage, &tract_nnef::nnef(), bytes).map(drop)
+    })
+}
+
+/// The structural check, tract's parse, and (before decluttering folds constants, the step
+/// where a huge `tile` or reshape would be materialised) every tensor of the parsed graph
+/// static and within the size limit.
+fn checked_model(stage: Stage, nnef: &Nnef, bytes: &[u8]) -> Result<TypedModel, BundleError> {
     let refused = |source| BundleError::Graph {
         stage: stage.name(),
         source,
     };
     check_nnef_stage(bytes).map_err(refused)?;
-    let parse = || {
-        let nnef = tract_nnef::nnef();
-        let model = nnef
-            .model_for_read(&mut &bytes[..])
-            .map_err(engine_error(stage))?;
-        check_tensor_sizes(&model).map_err(refused)
-    };
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse)).unwrap_or_else(|panic| {
+    let model = nnef
+        .model_for_read(&mut &bytes[..])
+        .map_err(engine_error(stage))?;
+    check_tensor_sizes(&model).map_err(refused)?;
+    Ok(model)
+}
+
+/// `f`, with a panic inside tract (some graphs it cannot run make it panic, not err) turned
+/// into [`BundleError::Engine`] naming `stage`.
+pub(crate) fn confined<T>(
+    stage: Stage,
+    f: impl FnOnce() -> Result<T, BundleError>,
+) -> Result<T, BundleError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
         Err(BundleError::Engine {
             stage: stage.name(),
             message: format!("tract panicked: {}", super::panic_message(&*panic)),

@@ -56,7 +56,7 @@ use crate::model_dims::ModelDims;
 
 pub(crate) use graph_load::onnx_model;
 pub use graph_load::{HalfArithmetic, parse_stage_graph};
-pub(crate) use graph_load::{check_graph_io, datum, engine_error, nnef_model};
+pub(crate) use graph_load::{check_graph_io, confined, datum, engine_error, nnef_model};
 pub use kernel_family::{KernelFamily, kernel_family};
 pub use rewrite::Rewrites;
 
@@ -311,17 +311,7 @@ impl TractEngine {
         // structural check before tract (`graph_check`) keeps those graphs away.
         let runners = Stage::ALL
             .iter()
-            .map(|&stage| {
-                catch_unwind(AssertUnwindSafe(|| {
-                    StageRunner::load(bundle, &nnef, stage, half)
-                }))
-                .unwrap_or_else(|panic| {
-                    Err(BundleError::Engine {
-                        stage: stage.name(),
-                        message: format!("tract panicked: {}", panic_message(&*panic)),
-                    })
-                })
-            })
+            .map(|&stage| confined(stage, || StageRunner::load(bundle, &nnef, stage, half)))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             dims: bundle.dims().clone(),
