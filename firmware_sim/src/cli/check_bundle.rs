@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use safetensors::SafeTensors;
+use satmap_runtime::bundle::signature::{KeyFileError, read_hex_file};
 use satmap_runtime::bundle::{Bundle, BundlePublicKey, Trust};
 use satmap_runtime::capacity::CAN_BUS_LEN;
 use satmap_runtime::engine::Engine;
@@ -149,18 +150,20 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// The public key of a `.pub` file (read up to one byte past its longest valid form).
+/// The public key of a `.pub` file (`read_hex_file`: a pipe never blocks, a long file is
+/// refused unread).
 ///
 /// # Errors
 /// The file unreadable ([`anyhow`]) or not a key ([`crate::cli::drive::BadArgument`]).
 pub fn read_public_key(path: &Path) -> Result<BundlePublicKey> {
-    use std::io::Read as _;
-    let mut text = Vec::with_capacity(66);
-    std::fs::File::open(path)
-        .and_then(|f| f.take(66).read_to_end(&mut text))
-        .with_context(|| format!("reading {}", path.display()))?;
-    BundlePublicKey::parse(&text)
-        .map_err(|e| crate::cli::drive::BadArgument(format!("{}: {e}", path.display())).into())
+    let bad = |e: &dyn std::fmt::Display| {
+        crate::cli::drive::BadArgument(format!("{}: {e}", path.display()))
+    };
+    match read_hex_file::<32>(path) {
+        Ok(bytes) => BundlePublicKey::from_bytes(&bytes).map_err(|e| bad(&e).into()),
+        Err(KeyFileError::Text(e)) => Err(bad(&e).into()),
+        Err(KeyFileError::Io(e)) => Err(e).with_context(|| format!("reading {}", path.display())),
+    }
 }
 
 /// Check one bundle (accepted under `trust`), printing its lines; returns its worst difference.

@@ -5,13 +5,12 @@
 //! it (`signature_path`: `x.satmap.sig`, or `manifest.sig` in a folder), and checked back with
 //! the key's public half.
 
-use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use ed25519_dalek::SigningKey;
 use ed25519_dalek::ed25519::signature::Signer as _;
-use satmap_runtime::bundle::signature::signed_message;
+use satmap_runtime::bundle::signature::{KeyFileError, read_hex_file, signed_message};
 use satmap_runtime::bundle::{Bundle, BundlePublicKey, BundleSignature, Trust, signature_path};
 
 use crate::cli::drive::BadArgument;
@@ -27,28 +26,25 @@ pub struct Args {
     pub bundles: Vec<PathBuf>,
 }
 
-/// The secret key of a `.key` file: 64 lowercase hex digits and an optional newline (read up to
-/// one byte past that, so a wrong file is refused without reading it whole).
+/// The secret key of a `.key` file: 64 lowercase hex digits and an optional newline
+/// (`read_hex_file`: a wrong file is refused without reading it whole, a pipe never blocks).
 ///
 /// # Errors
 /// The file unreadable ([`anyhow`]) or not a key ([`BadArgument`]).
 pub fn read_secret_key(path: &Path) -> Result<SigningKey> {
-    let mut text = Vec::with_capacity(66);
-    std::fs::File::open(path)
-        .and_then(|f| f.take(66).read_to_end(&mut text))
-        .with_context(|| format!("reading {}", path.display()))?;
-    let digits = text.strip_suffix(b"\n").unwrap_or(&text);
-    let mut seed = [0u8; 32];
-    let lower = digits
-        .iter()
-        .all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'));
-    if !lower || hex::decode_to_slice(digits, &mut seed).is_err() {
-        return Err(BadArgument(format!(
-            "{}: a secret key is 64 lowercase hex digits and a newline",
-            path.display()
-        ))
-        .into());
-    }
+    let mut seed = match read_hex_file::<32>(path) {
+        Ok(seed) => seed,
+        Err(KeyFileError::Text(_)) => {
+            return Err(BadArgument(format!(
+                "{}: a secret key is 64 lowercase hex digits and a newline",
+                path.display()
+            ))
+            .into());
+        }
+        Err(KeyFileError::Io(e)) => {
+            return Err(e).with_context(|| format!("reading {}", path.display()));
+        }
+    };
     let key = SigningKey::from_bytes(&seed);
     seed.fill(0);
     Ok(key)

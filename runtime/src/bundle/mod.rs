@@ -142,7 +142,7 @@ impl Bundle {
             ),
         })?;
         check_trust(&path, raw_digest, trust, signature)?;
-        let (archive, manifest) = archive::Archive::parse(&path, bytes)?;
+        let (archive, manifest) = archive::Archive::parse(&path, bytes, raw_digest)?;
         if archive.digest != raw_digest {
             // Unreachable for an archive in canonical form; kept so that what was verified is
             // by construction what is loaded.
@@ -308,21 +308,20 @@ fn check_trust(
     }
 }
 
-/// The signature file at `path`, read up to one byte past its longest valid form (so that a
-/// huge file or `/dev/zero` costs nothing).
+/// The signature file at `path` ([`signature::read_hex_file`]: a pipe never blocks, a huge file
+/// or `/dev/zero` costs nothing).
 fn read_signature(path: &Path) -> Result<BundleSignature, BundleError> {
-    use std::io::Read as _;
-    let mut text = Vec::with_capacity(130);
-    std::fs::File::open(path)
-        .and_then(|file| file.take(130).read_to_end(&mut text))
-        .map_err(|e| BundleError::Unsigned {
+    match signature::read_hex_file::<64>(path) {
+        Ok(bytes) => Ok(BundleSignature::from_bytes(&bytes)),
+        Err(signature::KeyFileError::Io(e)) => Err(BundleError::Unsigned {
             path: path.to_path_buf(),
             reason: e.to_string(),
-        })?;
-    BundleSignature::parse(&text).map_err(|reason| BundleError::SignatureFile {
-        path: path.to_path_buf(),
-        reason,
-    })
+        }),
+        Err(signature::KeyFileError::Text(reason)) => Err(BundleError::SignatureFile {
+            path: path.to_path_buf(),
+            reason,
+        }),
+    }
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, BundleError> {

@@ -171,6 +171,35 @@ pub fn archive_digest_unparsed(bytes: &[u8]) -> Option<Sha256Digest> {
         .then(|| Sha256Digest::of(&bytes[..prefix]))
 }
 
+/// Why a key or signature file gave no bytes.
+#[derive(Debug, thiserror::Error)]
+pub enum KeyFileError {
+    /// Unreadable, not a regular file (a pipe is never opened), or the OS error.
+    #[error("{0}")]
+    Io(std::io::Error),
+    /// Not the strict hex text (a file longer than it is refused unread past one byte).
+    #[error("{0}")]
+    Text(KeyTextError),
+}
+
+/// The `N` bytes of a key or signature file (`.pub`, `.key`, `.sig`): exactly `2 N` lowercase
+/// hex digits and an optional `\n`, read through [`crate::host_files::read_capped`].
+///
+/// # Errors
+/// [`KeyFileError`].
+pub fn read_hex_file<const N: usize>(path: &std::path::Path) -> Result<[u8; N], KeyFileError> {
+    let text = match crate::host_files::read_capped(path, 2 * N as u64 + 1) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::FileTooLarge => {
+            return Err(KeyFileError::Text(KeyTextError::NotHex {
+                expected_digits: 2 * N,
+            }));
+        }
+        Err(e) => return Err(KeyFileError::Io(e)),
+    };
+    hex_bytes(&text).map_err(KeyFileError::Text)
+}
+
 /// `N` bytes from exactly `2 N` lowercase hex digits and an optional `\n`.
 fn hex_bytes<const N: usize>(text: &[u8]) -> Result<[u8; N], KeyTextError> {
     let digits = text.strip_suffix(b"\n").unwrap_or(text);
