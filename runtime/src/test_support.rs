@@ -307,3 +307,16 @@ pub(crate) fn retime(frame: &mut Frame<'_>, timestamp_us: u64) {
         image.capture_us = timestamp_us;
     }
 }
+
+/// A runtime over a [`FakeEngine`] of the `test` dims, the nuScenes-like rig and a fixed
+/// satellite crop: what the step tests drive.
+pub fn fake_runtime(
+    crop: &[u8],
+) -> crate::step::SatMap<FakeEngine, crate::satellite::FixedCrop<'_>> {
+    crate::step::SatMap::new(
+        FakeEngine::new(crate::model_dims::ModelDims::test_config()),
+        &nuscenes_like(),
+        crate::satellite::FixedCrop(crop),
+    )
+    .unwrap()
+}

@@ -4,13 +4,7 @@
 //! it publishes what the one-call step publishes.
 
 use super::*;
-use crate::satellite::FixedCrop;
-use crate::test_support::{FakeEngine, Images, crop, nuscenes_like};
-
-fn runtime(crop: &[u8]) -> SatMap<FakeEngine, FixedCrop<'_>> {
-    let dims = ModelDims::test_config();
-    SatMap::new(FakeEngine::new(dims), &nuscenes_like(), FixedCrop(crop)).unwrap()
-}
+use crate::test_support::{Images, crop, fake_runtime};
 
 #[test]
 fn what_a_slice_reads_must_be_what_step_begin_checked() {
@@ -18,9 +12,9 @@ fn what_a_slice_reads_must_be_what_step_begin_checked() {
     let c = crop(&dims);
     let images = Images::new(&dims, 3);
     let other = Images::new(&dims, 99);
-    let one_call = runtime(&c).step(&images.frame(1)).unwrap().digest;
+    let one_call = fake_runtime(&c).step(&images.frame(1)).unwrap().digest;
 
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     let good = images.frame(1);
     rt.step_begin(&good).unwrap();
     let changed = |part| Err::<SliceDone, _>(StepError::FrameChanged { sequence: 1, part });

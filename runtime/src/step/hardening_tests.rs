@@ -9,20 +9,13 @@ use super::*;
 use crate::calibration::{CalibrationFault, CalibrationField};
 use crate::frame::Axis;
 use crate::satellite::FixedCrop;
-use crate::test_support::{FakeEngine, Images, count_allocations, crop, nuscenes_like};
-
-fn runtime(crop: &[u8]) -> SatMap<FakeEngine, FixedCrop<'_>> {
-    SatMap::new(
-        FakeEngine::new(ModelDims::test_config()),
-        &nuscenes_like(),
-        FixedCrop(crop),
-    )
-    .unwrap()
-}
+use crate::test_support::{
+    FakeEngine, Images, count_allocations, crop, fake_runtime, nuscenes_like,
+};
 
 /// The last map of a fresh runtime that stepped `sequences` (normal frames) in order.
 fn undisturbed(crop: &[u8], images: &Images, sequences: &[u64]) -> MapFrame {
-    let mut rt = runtime(crop);
+    let mut rt = fake_runtime(crop);
     let mut last = None;
     for &s in sequences {
         last = Some(rt.step(&images.frame(s)).unwrap().clone());
@@ -36,7 +29,7 @@ fn sequence_max_is_refused_and_the_next_normal_frame_steps_as_on_a_fresh_runtime
     let c = crop(&dims);
     let images = Images::new(&dims, 11);
     let expected = undisturbed(&c, &images, &[1, 2]);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     let first = rt.step(&images.frame(1)).unwrap().clone();
     let mut bad = images.frame(2);
     bad.sequence = u64::MAX;
@@ -63,7 +56,7 @@ fn timestamp_max_is_refused_and_the_next_normal_frame_steps_as_on_a_fresh_runtim
     let c = crop(&dims);
     let images = Images::new(&dims, 12);
     let expected = undisturbed(&c, &images, &[1, 2]);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     let first = rt.step(&images.frame(1)).unwrap().clone();
     let mut bad = images.frame(2);
     bad.timestamp_us = u64::MAX;
@@ -119,7 +112,7 @@ fn gaps_just_inside_the_limits_are_accepted_and_just_beyond_refused() {
         ),
     ];
     for (sequence, timestamp_us, refusal) in cases {
-        let mut rt = runtime(&c);
+        let mut rt = fake_runtime(&c);
         let first = rt.step(&images.frame(1)).unwrap().clone();
         let result = rt.step(&after_first(sequence, timestamp_us)).cloned();
         match refusal {
@@ -185,7 +178,7 @@ fn reset_allows_a_restart_from_sequence_zero() {
     let dims = ModelDims::test_config();
     let c = crop(&dims);
     let images = Images::new(&dims, 15);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     rt.step(&images.frame(5)).unwrap();
     let sixth = rt.step(&images.frame(6)).unwrap().clone();
     // Without a reset a restarted counter is refused, and changes nothing.
@@ -224,7 +217,7 @@ fn a_corrupt_first_frame_is_recovered_by_reset() {
     let dims = ModelDims::test_config();
     let c = crop(&dims);
     let images = Images::new(&dims, 16);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     let mut anchor = images.frame(1);
     anchor.sequence = u64::MAX;
     crate::test_support::retime(&mut anchor, u64::MAX);
@@ -347,7 +340,7 @@ fn each_implausible_field_is_refused_then_the_runtime_steps_normally() {
         ),
     ];
     for (corrupt, refusal, text) in cases {
-        let mut rt = runtime(&c);
+        let mut rt = fake_runtime(&c);
         let first = rt.step(&images.frame(1)).unwrap().clone();
         let mut bad = images.frame(2);
         corrupt(&mut bad);
@@ -369,7 +362,7 @@ fn values_at_the_limits_are_accepted() {
     let dims = ModelDims::test_config();
     let c = crop(&dims);
     let images = Images::new(&dims, 18);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     let mut edge = images.frame(1);
     edge.pose.position_m = glam::DVec2::new(1e7, -1e7);
     edge.pose.yaw_rad = -1e4;
@@ -386,7 +379,7 @@ fn limits_are_validated_and_configurable() {
     let images = Images::new(&dims, 19);
     let d = FrameLimits::DEFAULT;
     assert_eq!(FrameLimits::default(), d);
-    assert_eq!(runtime(&c).limits(), &d);
+    assert_eq!(fake_runtime(&c).limits(), &d);
     let bad: [(FrameLimits, &str); 7] = [
         (
             FrameLimits {
@@ -508,7 +501,7 @@ fn calibration_fx_1e300_is_refused_at_new_and_at_recalibrate() {
     assert_eq!(r.err(), Some(refused));
 
     let expected = undisturbed(&c, &images, &[1, 2]);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     rt.step(&images.frame(1)).unwrap();
     let table = rt.lut().to_dense();
     assert_eq!(rt.recalibrate(&bad), Err(refused));
@@ -586,7 +579,7 @@ fn each_out_of_range_calibration_is_refused_by_recalibrate_and_the_old_table_sta
         ),
     ];
     let expected = undisturbed(&c, &images, &[1, 2]);
-    let mut rt = runtime(&c);
+    let mut rt = fake_runtime(&c);
     rt.step(&images.frame(1)).unwrap();
     let table = rt.lut().to_dense();
     for (corrupt, camera, is_expected) in cases {

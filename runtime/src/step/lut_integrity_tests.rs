@@ -5,25 +5,15 @@
 //! undisturbed one.
 
 use super::*;
-use crate::satellite::FixedCrop;
-use crate::test_support::{FakeEngine, Images, crop, nuscenes_like};
-
-fn runtime(crop: &[u8]) -> SatMap<FakeEngine, FixedCrop<'_>> {
-    SatMap::new(
-        FakeEngine::new(ModelDims::test_config()),
-        &nuscenes_like(),
-        FixedCrop(crop),
-    )
-    .unwrap()
-}
+use crate::test_support::{Images, crop, fake_runtime, nuscenes_like};
 
 #[test]
 fn every_bit_flip_of_the_table_in_use_fails_the_step_until_recalibrate() {
     let dims = ModelDims::test_config();
     let c = crop(&dims);
     let images = Images::new(&dims, 38);
-    let mut clean = runtime(&c);
-    let mut rt = runtime(&c);
+    let mut clean = fake_runtime(&c);
+    let mut rt = fake_runtime(&c);
     let in_use_bytes = rt.lut.indices_in_use_bytes();
     let flips = 200usize;
     for (sequence, k) in (1u64..).zip(0..flips) {
