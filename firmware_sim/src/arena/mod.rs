@@ -14,10 +14,12 @@
 //! [`ArenaAllocator::host_side`], which serves from the system allocator: the arena then holds
 //! exactly what the ECU would hold. The replay is single-threaded, so one global flag suffices.
 
+mod storage;
 pub mod system_malloc;
 
+pub use storage::ArenaStorage;
+
 use core::alloc::{GlobalAlloc, Layout};
-use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 use std::alloc::System;
 use std::io::Write;
@@ -72,44 +74,6 @@ pub struct ArenaStats {
     pub peak_bytes: usize,
     /// Number of allocations (including reallocations) since `init`.
     pub allocations: usize,
-}
-
-/// Backing storage of the arena: a static, 16-byte aligned byte array.
-#[repr(C, align(16))]
-pub struct ArenaStorage<const BYTES: usize>(UnsafeCell<[u8; BYTES]>);
-
-// SAFETY: the storage is only ever handed out once, to the allocator, by `ArenaAllocator::init`;
-// every access after that goes through the TLSF heap, which serialises with a critical section.
-unsafe impl<const BYTES: usize> Sync for ArenaStorage<BYTES> {}
-
-impl<const BYTES: usize> ArenaStorage<BYTES> {
-    /// Zeroed storage (placed in .bss, so it costs no file size).
-    #[must_use]
-    pub const fn new() -> Self {
-        Self(UnsafeCell::new([0; BYTES]))
-    }
-
-    /// Size in bytes.
-    #[must_use]
-    pub const fn len(&self) -> usize {
-        BYTES
-    }
-
-    /// True for a zero-sized storage.
-    #[must_use]
-    pub const fn is_empty(&self) -> bool {
-        BYTES == 0
-    }
-
-    fn start(&self) -> usize {
-        self.0.get() as usize
-    }
-}
-
-impl<const BYTES: usize> Default for ArenaStorage<BYTES> {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 /// Counting TLSF global allocator over a fixed arena.

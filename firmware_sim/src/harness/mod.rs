@@ -14,7 +14,7 @@
 //! - [`timed_source`]: the satellite-crop timing decorator.
 //! - [`world_imagery`]: a synthetic world's satellite raster as imagery for the route-pack
 //!   builder.
-//! - [`report`]: the report, its verdicts, text and JSON.
+//! - [`report`]: the report, its verdicts and JSON; `report_text` its printed table.
 //! - [`degraded`]: why a step ran without the satellite prior; counts and shares per reason.
 //!
 //! What runs where: the ECU side (graph engine, runtime buffers, each step) allocates from the
@@ -29,6 +29,7 @@ pub mod degraded;
 pub mod error;
 mod replay;
 pub mod report;
+mod report_text;
 pub mod route_replay;
 mod source;
 pub mod stats;
