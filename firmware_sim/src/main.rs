@@ -4,7 +4,7 @@
 //! dispatches, so that adding a tool touches one enum line here.
 
 use clap::{Parser, Subcommand};
-use satmap_runtime::capacity::layout::ARENA_BYTES;
+use satmap_runtime::capacity::layout::{ARENA_BYTES, STEP_SCRATCH_BYTES};
 use satmap_sim::arena::{ArenaAllocator, ArenaStorage};
 
 /// The process allocator: the system's until `drive` hands it the arena, then the counting TLSF
@@ -13,6 +13,8 @@ use satmap_sim::arena::{ArenaAllocator, ArenaStorage};
 static ALLOC: ArenaAllocator = ArenaAllocator::new();
 /// The fixed arena, `[arena] bytes` of memory_layout.toml (in .bss: untouched pages cost nothing).
 static ARENA: ArenaStorage<ARENA_BYTES> = ArenaStorage::new();
+/// The per-step scratch region, `[arena] step_scratch_bytes` (also in .bss).
+static STEP_SCRATCH: ArenaStorage<STEP_SCRATCH_BYTES> = ArenaStorage::new();
 
 /// SatMap host harness and tools.
 #[derive(Parser)]
@@ -63,7 +65,10 @@ fn main() -> std::process::ExitCode {
         Command::Evaluate(args) => satmap_sim::cli::evaluate::run(&args),
         Command::Render(args) => satmap_sim::cli::render::run(&args),
         Command::Drive(args) => {
-            satmap_sim::cli::drive::run(&args, &ALLOC, &|bytes| ALLOC.init(&ARENA, bytes))
+            satmap_sim::cli::drive::run(&args, &ALLOC, &|arena_bytes, scratch_bytes| {
+                ALLOC.init(&ARENA, arena_bytes)
+                    && ALLOC.init_step_scratch(&STEP_SCRATCH, scratch_bytes)
+            })
         }
         Command::MemoryMap(args) => satmap_sim::cli::memory_map::run(&args),
         Command::CheckBundle(args) => satmap_sim::cli::check_bundle::run(&args),

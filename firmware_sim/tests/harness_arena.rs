@@ -3,18 +3,103 @@
 //! no step after warm-up peaks higher than the last warm-up step (each step's own peak, the
 //! arena's peak restarted before it), the runtime makes no allocation outside the graph engine
 //! after warm-up, and no step runs degraded (counted by the instrumented arena allocator,
-//! declared as this test binary's global allocator).
+//! declared as this test binary's global allocator). And every committed bundle steps without
+//! one allocation in the arena: all of a step's allocations come from the per-step scratch,
+//! which the load-time rehearsal sized exactly and which is empty again after every step.
 
 use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard, Once};
 
-use satmap_runtime::capacity::layout::{ARENA_BYTES, PEAK_BUDGET_BYTES, STEP_PERIOD_US};
+use satmap_runtime::capacity::layout::{
+    ARENA_BYTES, PEAK_BUDGET_BYTES, STEP_PERIOD_US, STEP_SCRATCH_BYTES,
+};
 use satmap_sim::arena::{ArenaAllocator, ArenaStorage};
-use satmap_sim::harness::report::WARMUP_STEPS;
+use satmap_sim::harness::report::{Report, WARMUP_STEPS};
 use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay};
 
 #[global_allocator]
 static ALLOC: ArenaAllocator = ArenaAllocator::new();
 static ARENA: ArenaStorage<ARENA_BYTES> = ArenaStorage::new();
+static STEP_SCRATCH: ArenaStorage<STEP_SCRATCH_BYTES> = ArenaStorage::new();
+
+/// The allocator's region label is process-wide: one replay at a time (the test harness runs
+/// tests on parallel threads).
+static ONE_REPLAY: Mutex<()> = Mutex::new(());
+static INIT: Once = Once::new();
+
+/// The arena and the step scratch, given to the allocator once; the replay lock held.
+fn in_arena() -> MutexGuard<'static, ()> {
+    let guard = ONE_REPLAY
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    INIT.call_once(|| {
+        assert!(ALLOC.init(&ARENA, ARENA_BYTES));
+        assert!(ALLOC.init_step_scratch(&STEP_SCRATCH, STEP_SCRATCH_BYTES));
+    });
+    guard
+}
+
+fn replay_cfg(bundle: &str, frames: usize) -> ReplayConfig {
+    ReplayConfig {
+        bundle_dir: PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../models/bundles")
+            .join(bundle),
+        scenario: ScenarioInput::Synthetic {
+            seed: 1,
+            speed_mps: 8.0,
+            drive_hz: 2.0,
+        },
+        frames,
+        rate_hz: 1e6 / STEP_PERIOD_US as f64,
+        show_progress: false,
+        max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
+        pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
+        threads: std::num::NonZeroUsize::MIN,
+    }
+}
+
+/// Every step of `r` took nothing from the arena, and its scratch was exactly the rehearsal's
+/// and empty after it.
+fn assert_steps_allocate_only_in_the_scratch(r: &Report) {
+    let sc = &r.arena.step_scratch;
+    assert_eq!(sc.capacity_bytes, STEP_SCRATCH_BYTES);
+    assert!(
+        sc.rehearsal_peak_bytes > 0 && sc.rehearsal_allocations > 0,
+        "{sc:?}"
+    );
+    assert_eq!(sc.step_peak_max_bytes, sc.rehearsal_peak_bytes, "{sc:?}");
+    for s in &r.steps {
+        assert_eq!(s.arena_allocations, 0, "step {}: {s:?}", s.sequence);
+        assert_eq!(s.step_scratch_left_bytes, 0, "step {}: {s:?}", s.sequence);
+        assert_eq!(
+            s.step_scratch_peak_bytes, sc.rehearsal_peak_bytes,
+            "step {}",
+            s.sequence
+        );
+        assert_eq!(
+            s.step_peak_bytes, s.arena_current_bytes,
+            "step {} took arena memory",
+            s.sequence
+        );
+        assert_eq!(s.engine_allocations, sc.rehearsal_allocations);
+    }
+    assert_eq!(r.allocations.arena_max_per_step, 0);
+    assert_eq!(r.allocations.step_scratch_left_max_bytes, 0);
+    assert!(r.within_budgets(), "{:?}", r.exceeded);
+}
+
+/// Issue 38, part 1: 2,353 allocations a step of the default bundle used to come and go in the
+/// arena; every committed bundle (f32, f16 and int8 weights, archive and folder) now makes none
+/// there.
+#[test]
+fn every_committed_bundle_steps_without_an_arena_allocation() {
+    let _one = in_arena();
+    for bundle in ["test.satmap", "test-f16.satmap", "test-int8.satmap", "test"] {
+        let out = replay(&replay_cfg(bundle, 3), Some(&ALLOC)).unwrap();
+        assert_eq!(out.report.steps.len(), 3, "{bundle}");
+        assert_steps_allocate_only_in_the_scratch(&out.report);
+    }
+}
 
 /// Run digest of the demo drive, as `make demo` prints it (`run digest`), per family of tract
 /// kernels (`engine_tract::kernel_family`: bit-identical within a family, not across);
@@ -38,22 +123,8 @@ const DEMO_FRAMES: usize = 40;
 
 #[test]
 fn demo_drive_has_its_pinned_digest_fits_the_arena_and_does_not_grow_after_warm_up() {
-    assert!(ALLOC.init(&ARENA, ARENA_BYTES));
-    let cfg = ReplayConfig {
-        bundle_dir: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/bundles/test"),
-        scenario: ScenarioInput::Synthetic {
-            seed: 1,
-            speed_mps: 8.0,
-            drive_hz: 2.0,
-        },
-        frames: DEMO_FRAMES,
-        rate_hz: 1e6 / STEP_PERIOD_US as f64,
-        show_progress: false,
-        max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
-        pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
-        threads: std::num::NonZeroUsize::MIN,
-    };
-    let out = replay(&cfg, Some(&ALLOC)).unwrap();
+    let _one = in_arena();
+    let out = replay(&replay_cfg("test", DEMO_FRAMES), Some(&ALLOC)).unwrap();
     let r = &out.report;
     assert_eq!(r.steps.len(), DEMO_FRAMES);
     assert_eq!(r.config, "test");
@@ -88,10 +159,7 @@ fn demo_drive_has_its_pinned_digest_fits_the_arena_and_does_not_grow_after_warm_
     // Judged after warm-up: each step's own peak (restarted before it) against the last warm-up
     // step's, so growth shows even where it stays below an earlier peak.
     let warm = &r.steps[WARMUP_STEPS - 1];
-    assert!(
-        warm.step_peak_bytes > warm.arena_current_bytes,
-        "a step's own peak includes its engine scratch: {warm:?}"
-    );
+    assert_steps_allocate_only_in_the_scratch(r);
     for s in &r.steps[WARMUP_STEPS..] {
         assert_eq!(
             s.step_peak_bytes.saturating_sub(warm.step_peak_bytes),

@@ -13,10 +13,16 @@
 //! host-side simulation (rendering sensor frames, ground truth, evaluation, the report) inside
 //! [`ArenaAllocator::host_side`], which serves from the system allocator: the arena then holds
 //! exactly what the ECU would hold. The replay is single-threaded, so one global flag suffices.
+//!
+//! Once [`ArenaAllocator::init_step_scratch`] gave it the per-step scratch region, everything
+//! allocated while the label is [`ArenaRegion::Step`] (on any thread: the engine's worker
+//! threads too) comes from that region instead of the arena ([`step_scratch`]).
 
+mod step_scratch;
 mod storage;
 pub mod system_malloc;
 
+pub use step_scratch::{StepScratch, StepScratchStats};
 pub use storage::ArenaStorage;
 
 use core::alloc::{GlobalAlloc, Layout};
@@ -37,7 +43,8 @@ pub enum ArenaRegion {
     GraphEngine = 1,
     /// The runtime's fixed buffers reserved by `SatMap::new` (the `[region.*]` entries).
     RuntimeRegions = 2,
-    /// One replay step (graph engine activations; the runtime itself allocates nothing).
+    /// One replay step (graph engine activations; the runtime itself allocates nothing): served
+    /// by the step scratch once it is initialised.
     Step = 3,
 }
 
@@ -49,7 +56,7 @@ impl ArenaRegion {
             Self::Unlabelled => "arena",
             Self::GraphEngine => "graph_engine",
             Self::RuntimeRegions => "runtime regions",
-            Self::Step => "step activations (graph_engine)",
+            Self::Step => "step activations (in the arena: no step scratch given)",
         }
     }
 
@@ -72,8 +79,18 @@ pub struct ArenaStats {
     pub current_bytes: usize,
     /// Highest `current_bytes` since `init` or the last `reset_peak`.
     pub peak_bytes: usize,
-    /// Number of allocations (including reallocations) since `init`.
+    /// Number of allocations (including reallocations) the arena served since `init`.
     pub allocations: usize,
+    /// The per-step scratch region's counters.
+    pub step_scratch: StepScratchStats,
+}
+
+impl ArenaStats {
+    /// Allocations served by the arena and the step scratch together.
+    #[must_use]
+    pub const fn all_allocations(&self) -> usize {
+        self.allocations + self.step_scratch.allocations
+    }
 }
 
 /// Counting TLSF global allocator over a fixed arena.
@@ -87,6 +104,7 @@ pub struct ArenaAllocator {
     allocations: AtomicUsize,
     host_side: AtomicBool,
     region: AtomicU8,
+    step_scratch: StepScratch,
 }
 
 impl ArenaAllocator {
@@ -103,6 +121,7 @@ impl ArenaAllocator {
             allocations: AtomicUsize::new(0),
             host_side: AtomicBool::new(false),
             region: AtomicU8::new(0),
+            step_scratch: StepScratch::new(),
         }
     }
 
@@ -154,6 +173,22 @@ impl ArenaAllocator {
         true
     }
 
+    /// Give steps their own region: from now on allocations labelled [`ArenaRegion::Step`]
+    /// come from the first `size_bytes` of `storage`. Returns `false` (and changes nothing) if
+    /// already initialised or if `size_bytes` is zero or larger than the storage.
+    pub fn init_step_scratch<const BYTES: usize>(
+        &self,
+        storage: &'static ArenaStorage<BYTES>,
+        size_bytes: usize,
+    ) -> bool {
+        self.step_scratch.init(storage, size_bytes)
+    }
+
+    /// Restart the step scratch's peak from its current use (before each step).
+    pub fn reset_step_scratch_peak(&self) {
+        self.step_scratch.reset_peak();
+    }
+
     /// Current counters.
     #[must_use]
     pub fn stats(&self) -> ArenaStats {
@@ -167,6 +202,7 @@ impl ArenaAllocator {
             current_bytes: self.current.load(Ordering::Relaxed),
             peak_bytes: self.peak.load(Ordering::Relaxed),
             allocations: self.allocations.load(Ordering::Relaxed),
+            step_scratch: self.step_scratch.stats(),
         }
     }
 
@@ -184,19 +220,39 @@ impl ArenaAllocator {
     }
 
     fn exhausted(&self, layout: Layout) -> ! {
-        let s = self.stats();
+        let mut s = self.stats();
+        let in_scratch = self.region() == ArenaRegion::Step && s.step_scratch.capacity_bytes > 0;
+        if in_scratch {
+            s.capacity_bytes = s.step_scratch.capacity_bytes;
+            s.current_bytes = s.step_scratch.current_bytes;
+            s.peak_bytes = s.step_scratch.peak_bytes;
+        }
         let mut buf = FixedBuf::<512>::new();
         let _ = core::fmt::write(
             &mut buf,
             format_args!(
-                "ERROR(arena): region `{}` does not fit: it needs {} more bytes, the arena of {} \
-                 bytes has {} in use (peak {}). Raise [arena] bytes in memory_layout.toml or \
-                 pass a larger --arena-bytes.\n",
-                self.region().name(),
+                "ERROR(arena): region `{}` does not fit: it needs {} more bytes, its {} bytes have \
+                 {} in use (peak {}). Raise [arena] {} in memory_layout.toml or pass a larger \
+                 {}.\n",
+                if in_scratch {
+                    "step_scratch"
+                } else {
+                    self.region().name()
+                },
                 layout.size(),
                 s.capacity_bytes,
                 s.current_bytes,
-                s.peak_bytes
+                s.peak_bytes,
+                if in_scratch {
+                    "step_scratch_bytes"
+                } else {
+                    "bytes"
+                },
+                if in_scratch {
+                    "--step-scratch-bytes"
+                } else {
+                    "--arena-bytes"
+                },
             ),
         );
         let _ = std::io::stderr().write_all(buf.as_bytes());
@@ -210,14 +266,23 @@ impl Default for ArenaAllocator {
     }
 }
 
-// SAFETY: allocations after `init` come from the TLSF heap over the arena, earlier ones from the
-// system allocator; `dealloc` routes each pointer back by address range, so every block returns
-// to the allocator that made it.
+// SAFETY: allocations after `init` come from the TLSF heap over the arena (or, labelled as a step,
+// from the step scratch's heap over its own region), earlier ones from the system allocator;
+// `dealloc` routes each pointer back by address range, so every block returns to the allocator
+// that made it.
 unsafe impl GlobalAlloc for ArenaAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if !self.ready.load(Ordering::Acquire) || self.host_side.load(Ordering::Acquire) {
             // SAFETY: forwarded with the caller's layout.
             return unsafe { System.alloc(layout) };
+        }
+        if self.region() == ArenaRegion::Step && self.step_scratch.is_ready() {
+            // SAFETY: forwarded with the caller's layout; the scratch is ready.
+            let ptr = unsafe { self.step_scratch.alloc(layout) };
+            if ptr.is_null() {
+                self.exhausted(layout);
+            }
+            return ptr;
         }
         // SAFETY: forwarded with the caller's layout.
         let ptr = unsafe { GlobalAlloc::alloc(&self.heap, layout) };
@@ -231,7 +296,10 @@ unsafe impl GlobalAlloc for ArenaAllocator {
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        if self.in_arena(ptr) {
+        if self.step_scratch.contains(ptr) {
+            // SAFETY: `ptr` came from the step scratch with this layout.
+            unsafe { self.step_scratch.dealloc(ptr, layout) }
+        } else if self.in_arena(ptr) {
             self.current.fetch_sub(layout.size(), Ordering::Relaxed);
             // SAFETY: `ptr` came from the heap with this layout.
             unsafe { GlobalAlloc::dealloc(&self.heap, ptr, layout) }

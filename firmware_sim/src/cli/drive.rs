@@ -55,6 +55,10 @@ pub struct Args {
     /// Arena size, bytes (default and maximum: `[arena] bytes` of memory_layout.toml).
     #[arg(long)]
     pub arena_bytes: Option<usize>,
+    /// Per-step scratch region, bytes (default and maximum: `[arena] step_scratch_bytes`); a
+    /// bundle whose step needs more is refused at load, before the first step (exit 3).
+    #[arg(long)]
+    pub step_scratch_bytes: Option<usize>,
     /// Largest share of steps (0..=1) that may run without the satellite prior; more exits
     /// with code 5.
     #[arg(long, default_value_t = DEFAULT_MAX_DEGRADED_SHARE)]
@@ -166,7 +170,13 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
         return if c.is_bad_input() { EXIT_BAD_INPUT } else { 1 };
     }
     match e.downcast_ref::<HarnessError>() {
-        Some(HarnessError::Step { .. } | HarnessError::Init(_)) | None => 1,
+        Some(
+            HarnessError::Step { .. }
+            | HarnessError::Init(_)
+            | HarnessError::Rehearsal(_)
+            | HarnessError::StepScratchNotEmpty { .. },
+        )
+        | None => 1,
         Some(_) => EXIT_BAD_INPUT,
     }
 }
@@ -179,9 +189,9 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
 pub fn run(
     args: &Args,
     alloc: &'static ArenaAllocator,
-    init: &dyn Fn(usize) -> bool,
+    init: &dyn Fn(usize, usize) -> bool,
 ) -> Result<()> {
-    let (arena_bytes, rate_hz) = check_args(args)?;
+    let (arena_bytes, step_scratch_bytes, rate_hz) = check_args(args)?;
     let cfg = ReplayConfig {
         bundle_dir: args.bundle.clone(),
         scenario: match &args.scenario {
@@ -202,7 +212,7 @@ pub fn run(
     if let Some(pack_path) = &args.satellite_only {
         return run_satellite_only(args, pack_path, args.drive_hz);
     }
-    if !init(arena_bytes) {
+    if !init(arena_bytes, step_scratch_bytes) {
         return Err(BadArgument("the arena was already initialised".into()).into());
     }
     let outcome = replay(&cfg, Some(alloc))?;
@@ -327,13 +337,23 @@ pub const MAX_SPEED_MPS: f64 = 60.0;
 ///
 /// # Errors
 /// [`BadArgument`] naming the first argument out of range.
-pub fn check_args(args: &Args) -> Result<(usize, f64), BadArgument> {
+pub fn check_args(args: &Args) -> Result<(usize, usize, f64), BadArgument> {
     let bad = |m: String| Err(BadArgument(m));
     let arena_bytes = args.arena_bytes.unwrap_or(layout::ARENA_BYTES);
     if arena_bytes == 0 || arena_bytes > layout::ARENA_BYTES {
         return bad(format!(
             "--arena-bytes {arena_bytes} must be in 1..={} (the static arena of memory_layout.toml)",
             layout::ARENA_BYTES
+        ));
+    }
+    let step_scratch_bytes = args
+        .step_scratch_bytes
+        .unwrap_or(layout::STEP_SCRATCH_BYTES);
+    if step_scratch_bytes == 0 || step_scratch_bytes > layout::STEP_SCRATCH_BYTES {
+        return bad(format!(
+            "--step-scratch-bytes {step_scratch_bytes} must be in 1..={} (the static step \
+             scratch of memory_layout.toml)",
+            layout::STEP_SCRATCH_BYTES
         ));
     }
     if !(1..=MAX_FRAMES).contains(&args.frames) {
@@ -367,7 +387,7 @@ pub fn check_args(args: &Args) -> Result<(usize, f64), BadArgument> {
             args.max_degraded_share
         ));
     }
-    Ok((arena_bytes, rate_hz))
+    Ok((arena_bytes, step_scratch_bytes, rate_hz))
 }
 
 fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {

@@ -6,7 +6,10 @@ use std::path::Path;
 use satmap_runtime::capacity::layout;
 
 use super::degraded::DegradedReport;
-use super::report::{AllocationReport, ArenaReport, MapQuality, Report, StageReport, StepRecord};
+use super::rehearsal::Rehearsal;
+use super::report::{
+    AllocationReport, ArenaReport, MapQuality, Report, StageReport, StepRecord, StepScratchReport,
+};
 use super::stats::Percentiles;
 use super::timed_engine::{Timed, Timings};
 use super::{ReplayConfig, ScenarioInput};
@@ -25,6 +28,8 @@ pub(super) struct ArenaSnapshots {
     pub(super) end: ArenaStats,
     /// Peak since start-up (the harness restarts the arena's own peak before each step).
     pub(super) peak_bytes: usize,
+    /// The load-time rehearsal of one step in the step scratch.
+    pub(super) rehearsal: Rehearsal,
 }
 
 /// Everything a replay measured, by reference, for [`assemble`].
@@ -122,6 +127,13 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             graph_engine_bytes: a.after_engine.current_bytes - a.before_engine.current_bytes,
             runtime_regions_bytes: a.after_init.current_bytes - a.after_engine.current_bytes,
             layout_runtime_bytes: layout_runtime_bytes(),
+            step_scratch: StepScratchReport {
+                capacity_bytes: a.end.step_scratch.capacity_bytes,
+                rehearsal_peak_bytes: a.rehearsal.step_scratch_peak_bytes,
+                rehearsal_allocations: a.rehearsal.allocations,
+                step_peak_max_bytes: 0,
+                engine_threads: m.cfg.threads.get(),
+            },
         },
         allocations: AllocationReport {
             steps: 0,
@@ -129,6 +141,8 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             outside_engine_max_per_step: 0,
             decoder_max_per_step: 0,
             peak_growth_bytes: 0,
+            arena_max_per_step: 0,
+            step_scratch_left_max_bytes: 0,
         },
         degraded: DegradedReport::count(core::iter::empty(), m.cfg.max_degraded_share),
         run_digest: format!("{:016x}", m.run_digest),

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use satmap_runtime::engine::EngineError;
 use satmap_runtime::error::{InitError, StepError};
 
 /// Process exit code: the replay ran but a budget was exceeded.
@@ -56,6 +57,23 @@ pub enum HarnessError {
         sequence: u64,
         /// The error.
         error: StepError,
+    },
+    /// A stage failed in the load-time rehearsal that sizes the step scratch.
+    #[error("load-time rehearsal of the step: {0}")]
+    Rehearsal(EngineError),
+    /// Blocks allocated during a step were still live in the step scratch after it: the
+    /// scratch cannot be the step's alone.
+    #[error(
+        "{live_blocks} blocks ({live_bytes} bytes) allocated during a step outlived it in the \
+         step scratch ({when})"
+    )]
+    StepScratchNotEmpty {
+        /// When it was found.
+        when: &'static str,
+        /// Live blocks left.
+        live_blocks: usize,
+        /// Live bytes left.
+        live_bytes: usize,
     },
     /// Bad settings.
     #[error("settings: {0}")]

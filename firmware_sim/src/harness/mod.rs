@@ -5,6 +5,7 @@
 //! - `source`: the host-side scenario (synthetic drive or folder) and its route pack.
 //! - `replay`: the replay loop ([`replay()`]: engine and runtime in the arena, one step per
 //!   frame).
+//! - `rehearsal`: the load-time run of every stage that sizes the step scratch.
 //! - `assemble`: the [`report::Report`] built from what the loop measured.
 //! - [`error`]: [`HarnessError`] and the exit codes.
 //! - [`stats`]: latency series and nearest-rank percentiles.
@@ -27,6 +28,7 @@
 mod assemble;
 pub mod degraded;
 pub mod error;
+mod rehearsal;
 mod replay;
 pub mod report;
 mod report_text;

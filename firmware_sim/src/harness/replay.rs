@@ -17,6 +17,7 @@ use xxhash_rust::xxh3::Xxh3;
 
 use super::assemble::{ArenaSnapshots, Measured, assemble};
 use super::degraded::DegradedReason;
+use super::rehearsal::{Rehearsal, rehearse};
 use super::report::StepRecord;
 use super::route_replay::tile_buffer;
 use super::source::open_scenario;
@@ -135,6 +136,11 @@ pub fn replay(
     engine
         .set_threads(cfg.threads)
         .map_err(|e| HarnessError::Settings(e.to_string()))?;
+    // Size the step scratch before the first step: a bundle whose step does not fit stops here.
+    let rehearsal = match alloc {
+        Some(a) => rehearse(&mut engine, a)?,
+        None => Rehearsal::default(),
+    };
     let engine = TimedEngine::new(engine, frames, alloc);
     let after_engine = stats_of(alloc);
     label(alloc, ArenaRegion::RuntimeRegions);
@@ -222,6 +228,7 @@ pub fn replay(
         peak_bytes = peak_bytes.max(before.peak_bytes);
         if let Some(a) = alloc {
             a.reset_peak();
+            a.reset_step_scratch_peak();
         }
         let t = Instant::now();
         let result = satmap.step(&frame).map(|m| (m.digest, m.health));
@@ -252,8 +259,11 @@ pub fn replay(
             digest: map_digest,
             engine_allocations,
             decoder_allocations,
-            outside_engine_allocations: (after.allocations - before.allocations)
+            outside_engine_allocations: (after.all_allocations() - before.all_allocations())
                 .saturating_sub(engine_allocations + decoder_allocations),
+            arena_allocations: after.allocations - before.allocations,
+            step_scratch_peak_bytes: after.step_scratch.peak_bytes,
+            step_scratch_left_bytes: after.step_scratch.current_bytes,
             arena_peak_bytes: peak_bytes,
             step_peak_bytes: after.peak_bytes,
             arena_current_bytes: after.current_bytes,
@@ -312,6 +322,7 @@ pub fn replay(
                 after_init,
                 end,
                 peak_bytes: peak_bytes.max(end.peak_bytes),
+                rehearsal,
             },
             run_digest: digest.digest(),
             steps: std::mem::take(&mut steps),

@@ -52,6 +52,13 @@ pub struct StepRecord {
     pub step_peak_bytes: usize,
     /// Arena bytes in use after this step.
     pub arena_current_bytes: usize,
+    /// Allocations the arena itself served during the step (0 when the step scratch takes
+    /// them all).
+    pub arena_allocations: usize,
+    /// Peak of the step scratch during this step, bytes.
+    pub step_scratch_peak_bytes: usize,
+    /// Bytes still live in the step scratch after the step (0: nothing outlived it).
+    pub step_scratch_left_bytes: usize,
     /// The step took longer than the step period.
     pub deadline_miss: bool,
     /// The satellite prior was missing or corrupt (camera-only map).
@@ -75,6 +82,28 @@ pub struct ArenaReport {
     pub runtime_regions_bytes: usize,
     /// Sum of the runtime-owned regions in `memory_layout.toml` (capacity).
     pub layout_runtime_bytes: usize,
+    /// The per-step scratch region.
+    pub step_scratch: StepScratchReport,
+}
+
+/// The per-step scratch region (`[arena] step_scratch_bytes`): every allocation made during a
+/// step, sized at load.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct StepScratchReport {
+    /// Region size, bytes (0: the replay ran without one, outside the arena).
+    pub capacity_bytes: usize,
+    /// Peak of one step rehearsed at load on zero inputs, bytes.
+    pub rehearsal_peak_bytes: usize,
+    /// Allocations of the rehearsed step.
+    pub rehearsal_allocations: usize,
+    /// Largest peak of a replayed step, bytes.
+    pub step_peak_max_bytes: usize,
+    /// Engine threads. With one, a step's scratch is exactly the rehearsal's and empty after
+    /// the step (judged); with several, a worker may grow its lasting per-thread buffers the
+    /// first time it meets a larger product, in whichever step that happens, and those blocks
+    /// stay in the scratch (reported, bounded by threads x the largest product's buffers, not
+    /// judged).
+    pub engine_threads: usize,
 }
 
 /// Allocation counts after warm-up.
@@ -91,6 +120,12 @@ pub struct AllocationReport {
     /// Largest growth of a step's own arena peak ([`StepRecord::step_peak_bytes`]) over the
     /// last warm-up step's, bytes (0: the steady state allocates no more than warm-up did).
     pub peak_growth_bytes: usize,
+    /// Most allocations the arena itself served in one step, warm-up included (0: every
+    /// allocation of every step came from the step scratch).
+    pub arena_max_per_step: usize,
+    /// Most step-scratch bytes still live after a step, warm-up included (0: nothing
+    /// allocated in a step outlived it).
+    pub step_scratch_left_max_bytes: usize,
 }
 
 /// Map quality against the synthetic ground truth.
@@ -179,7 +214,25 @@ impl Report {
                 .map(|s| s.step_peak_bytes.saturating_sub(warm_peak))
                 .max()
                 .unwrap_or(0),
+            arena_max_per_step: self
+                .steps
+                .iter()
+                .map(|s| s.arena_allocations)
+                .max()
+                .unwrap_or(0),
+            step_scratch_left_max_bytes: self
+                .steps
+                .iter()
+                .map(|s| s.step_scratch_left_bytes)
+                .max()
+                .unwrap_or(0),
         };
+        self.arena.step_scratch.step_peak_max_bytes = self
+            .steps
+            .iter()
+            .map(|s| s.step_scratch_peak_bytes)
+            .max()
+            .unwrap_or(0);
         self.degraded = DegradedReport::count(
             self.steps.iter().map(|s| s.degraded_reason),
             self.degraded.max_share,
@@ -225,6 +278,29 @@ impl Report {
                 "the runtime allocated outside the graph engine after warm-up (up to {} per step)",
                 self.allocations.outside_engine_max_per_step
             ));
+        }
+        let scratch = &self.arena.step_scratch;
+        if scratch.capacity_bytes > 0 && self.allocations.arena_max_per_step > 0 {
+            exceeded.push(format!(
+                "the arena served up to {} allocations in a step (all belong in the step \
+                 scratch)",
+                self.allocations.arena_max_per_step
+            ));
+        }
+        if scratch.capacity_bytes > 0 && scratch.engine_threads == 1 {
+            if self.allocations.step_scratch_left_max_bytes > 0 {
+                exceeded.push(format!(
+                    "up to {} bytes allocated in a step outlived it in the step scratch",
+                    self.allocations.step_scratch_left_max_bytes
+                ));
+            }
+            if scratch.step_peak_max_bytes > scratch.rehearsal_peak_bytes {
+                exceeded.push(format!(
+                    "a step peaked at {} bytes of step scratch, over the {} bytes the load-time \
+                     rehearsal measured",
+                    scratch.step_peak_max_bytes, scratch.rehearsal_peak_bytes
+                ));
+            }
         }
         self.exceeded = exceeded;
     }

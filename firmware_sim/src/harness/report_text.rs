@@ -80,12 +80,38 @@ impl Report {
             mib(a.runtime_regions_bytes),
             a.layout_runtime_bytes
         );
+        let sc = &a.step_scratch;
+        if sc.capacity_bytes > 0 {
+            let _ = writeln!(
+                s,
+                "  step scratch     {} bytes ({:.1} MiB) at most in a step, {} ({:.1} MiB) at the \
+                 load-time rehearsal ({} allocations), region {} ({:.1} MiB)",
+                sc.step_peak_max_bytes,
+                mib(sc.step_peak_max_bytes),
+                sc.rehearsal_peak_bytes,
+                mib(sc.rehearsal_peak_bytes),
+                sc.rehearsal_allocations,
+                sc.capacity_bytes,
+                mib(sc.capacity_bytes)
+            );
+            if sc.engine_threads > 1 {
+                let _ = writeln!(
+                    s,
+                    "                   ({} engine threads: lasting per-worker buffers grown in a \
+                     step stay in the scratch, {} bytes at most; judged with one thread only)",
+                    sc.engine_threads, self.allocations.step_scratch_left_max_bytes
+                );
+            }
+        }
         let al = &self.allocations;
         let _ = writeln!(
             s,
-            "allocations/step   after {WARMUP_STEPS} warm-up steps ({} steps): outside the graph \
+            "allocations/step   in the arena max {} (every step), step scratch left after a step \
+             max {} bytes; after {WARMUP_STEPS} warm-up steps ({} steps): outside the graph \
              engine max {}, inside max {}, tile decoder scratch max {}; arena peak growth {} \
              bytes",
+            al.arena_max_per_step,
+            al.step_scratch_left_max_bytes,
             al.steps,
             al.outside_engine_max_per_step,
             al.engine_max_per_step,

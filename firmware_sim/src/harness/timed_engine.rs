@@ -141,7 +141,7 @@ impl<E: Engine> TimedEngine<E> {
     }
 
     fn allocations(&self) -> usize {
-        self.alloc.map_or(0, |a| a.stats().allocations)
+        self.alloc.map_or(0, |a| a.stats().all_allocations())
     }
 
     fn timed<T>(&mut self, what: Timed, f: impl FnOnce(&mut E) -> T) -> T {

@@ -46,7 +46,8 @@ impl<S: SatelliteSource> TimedSource<S> {
 
 impl<S: SatelliteSource> SatelliteSource for TimedSource<S> {
     fn crop(&mut self, pose: &EgoPose, spec: &CropSpec, out: &mut [u8]) -> Coverage {
-        let count = |a: Option<&'static ArenaAllocator>| a.map_or(0, |a| a.stats().allocations);
+        let count =
+            |a: Option<&'static ArenaAllocator>| a.map_or(0, |a| a.stats().all_allocations());
         let before = count(self.alloc);
         let t = Instant::now();
         let c = self.inner.crop(pose, spec, out);

@@ -1,6 +1,7 @@
 //! With the arena set below what is needed, `satmap-sim drive` names the region that does not
 //! fit and exits with the arena-exhausted code, without a panic; with a model that does not fit
-//! the memory map, it names the region and exits with the bad-input code.
+//! the memory map, it names the region and exits with the bad-input code; with a step scratch
+//! too small for the bundle's step, the load-time rehearsal stops it before the first step.
 
 use std::process::Command;
 
@@ -37,7 +38,7 @@ fn small_arena_names_the_graph_engine_region_and_exits_3() {
         stderr.contains("region `graph_engine` does not fit"),
         "{stderr}"
     );
-    assert!(stderr.contains("the arena of 1000000 bytes"), "{stderr}");
+    assert!(stderr.contains("its 1000000 bytes"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
@@ -47,4 +48,27 @@ fn arena_too_large_for_the_static_storage_is_bad_input() {
     assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{stderr}");
     assert!(stderr.contains("--arena-bytes"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// Issue 38, part 1: a graph whose step needs more than the layout's step scratch is refused at
+/// load (the rehearsal), with the region named, not at some later step.
+#[test]
+fn small_step_scratch_is_refused_at_load_naming_the_region() {
+    let (code, stderr) = drive(&["--step-scratch-bytes", "1000000"]);
+    assert_eq!(code, Some(EXIT_ARENA_EXHAUSTED), "{stderr}");
+    assert!(
+        stderr.contains("region `step_scratch` does not fit"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("--step-scratch-bytes"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn step_scratch_larger_than_the_static_region_is_bad_input() {
+    for bytes in ["0", "999999999999"] {
+        let (code, stderr) = drive(&["--step-scratch-bytes", bytes]);
+        assert_eq!(code, Some(i32::from(EXIT_BAD_INPUT)), "{bytes}: {stderr}");
+        assert!(stderr.contains("--step-scratch-bytes"), "{stderr}");
+    }
 }

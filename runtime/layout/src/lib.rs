@@ -85,8 +85,13 @@ pub struct Region {
 pub struct Arena {
     /// Size of the fixed arena the host harness runs the whole runtime in, bytes.
     pub bytes: usize,
-    /// Of which reserved for the graph engine (weights, plans, activations), bytes.
+    /// Of which reserved for the graph engine (weights, plans), bytes.
     pub graph_engine_bytes: usize,
+    /// The per-step scratch region, apart from the arena: every allocation made during a step
+    /// (the graph engine's activations, a compressed pack's tile decoder) is served here and
+    /// returned before the step ends, so the arena itself sees no allocation in a step. Sized
+    /// from the largest step the layout's model makes; checked at load by a rehearsal step.
+    pub step_scratch_bytes: usize,
 }
 
 /// Budgets the harness checks.
@@ -157,6 +162,12 @@ pub enum LayoutError {
         "ERROR(layout): [budgets] step_period_us is 0; give the deadline of one step in microseconds"
     )]
     ZeroStepPeriod,
+    /// The per-step scratch region is empty (every step allocates inside the graph engine).
+    #[error(
+        "ERROR(layout): [arena] step_scratch_bytes is 0; give the per-step scratch region's size \
+         (the largest step's graph engine activations)"
+    )]
+    ZeroStepScratch,
     /// The peak budget is larger than the arena, so it could never be checked.
     #[error(
         "ERROR(layout): [budgets] peak_bytes = {peak} exceeds [arena] bytes = {arena}; the arena \
@@ -196,6 +207,7 @@ impl LayoutError {
             Self::MissingRegion(_) => "MissingRegion",
             Self::MissingBudget(_) => "MissingBudget",
             Self::ZeroStepPeriod => "ZeroStepPeriod",
+            Self::ZeroStepScratch => "ZeroStepScratch",
             Self::PeakAboveArena { .. } => "PeakAboveArena",
             Self::ArenaTooSmall { .. } => "ArenaTooSmall",
         }
@@ -277,6 +289,9 @@ impl MemoryLayout {
         if self.budgets.step_period_us == 0 {
             return Err(LayoutError::ZeroStepPeriod);
         }
+        if self.arena.step_scratch_bytes == 0 {
+            return Err(LayoutError::ZeroStepScratch);
+        }
         if self.budgets.peak_bytes > self.arena.bytes {
             return Err(LayoutError::PeakAboveArena {
                 peak: self.budgets.peak_bytes,
@@ -349,6 +364,15 @@ impl MemoryLayout {
             s,
             "pub const GRAPH_ENGINE_BYTES: usize = {};",
             self.arena.graph_engine_bytes
+        );
+        let _ = writeln!(
+            s,
+            "/// Per-step scratch region (apart from the arena), bytes."
+        );
+        let _ = writeln!(
+            s,
+            "pub const STEP_SCRATCH_BYTES: usize = {};",
+            self.arena.step_scratch_bytes
         );
         let _ = writeln!(s, "/// Peak arena budget, bytes.");
         let _ = writeln!(
@@ -449,6 +473,13 @@ impl MemoryLayout {
             self.arena.bytes - used.min(self.arena.bytes),
             100.0 * (self.arena.bytes - used.min(self.arena.bytes)) as f64
                 / self.arena.bytes.max(1) as f64
+        );
+        let _ = writeln!(
+            s,
+            "step scratch         {:>12} bytes ({:.2} MiB), apart from the arena: every step's \
+             allocations, empty between steps",
+            self.arena.step_scratch_bytes,
+            mib(self.arena.step_scratch_bytes)
         );
         let _ = writeln!(
             s,

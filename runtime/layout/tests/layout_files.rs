@@ -44,7 +44,7 @@ type Case = (&'static str, fn(&LayoutError) -> bool);
 
 #[test]
 fn each_bad_fixture_fails_with_its_error() {
-    let cases: [Case; 9] = [
+    let cases: [Case; 10] = [
         ("bad_bytes", |e| {
             matches!(e, LayoutError::Bytes { region, declared: 368_000, computed: 368_640, .. }
                 if region == "value_features")
@@ -79,6 +79,9 @@ fn each_bad_fixture_fails_with_its_error() {
         ),
         ("bad_zero_step_period", |e| {
             matches!(e, LayoutError::ZeroStepPeriod)
+        }),
+        ("bad_zero_step_scratch", |e| {
+            matches!(e, LayoutError::ZeroStepScratch)
         }),
         ("bad_peak_above_arena", |e| {
             matches!(

@@ -45,20 +45,47 @@ impl AlignedBuf {
 }
 
 std::thread_local! {
-    /// Scratch buffers of this thread, kept between products: a fresh buffer of a few MiB is a
-    /// fresh mapping whose first touch page-faults on every run.
+    /// Scratch buffers of this thread, one per nesting depth of [`with_scratch`], kept between
+    /// products: a fresh buffer of a few MiB is a fresh mapping whose first touch page-faults on
+    /// every run. Each only grows, so once every product has run on a thread, no later product
+    /// allocates there (what lets a step's allocations end with the step).
     static SCRATCH: std::cell::RefCell<Vec<AlignedBuf>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Nesting depth of [`with_scratch`] on this thread.
+    static DEPTH: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// Restores the nesting depth when a scratch user returns or unwinds.
+struct DepthGuard(usize);
+
+impl Drop for DepthGuard {
+    fn drop(&mut self) {
+        DEPTH.set(self.0);
+    }
 }
 
 /// `f` over a scratch of `len` values whose contents are unspecified (the caller writes every
 /// value it reads), reused across calls on this thread; nested calls get distinct buffers.
 pub fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32]) -> R) -> R {
-    let mut buf = SCRATCH
-        .with(|s| s.borrow_mut().pop())
-        .filter(|b| b.len >= len)
-        .unwrap_or_else(|| AlignedBuf::zeros(len));
+    let depth = DEPTH.get();
+    let _restore = DepthGuard(depth);
+    DEPTH.set(depth + 1);
+    let mut buf = SCRATCH.with(|s| {
+        s.borrow_mut()
+            .get_mut(depth)
+            .map(core::mem::take)
+            .unwrap_or_default()
+    });
+    if buf.len < len {
+        buf = AlignedBuf::zeros(len);
+    }
     let out = f(&mut buf.as_mut_slice()[..len]);
-    SCRATCH.with(|s| s.borrow_mut().push(buf));
+    SCRATCH.with(|s| {
+        let mut s = s.borrow_mut();
+        if s.len() <= depth {
+            s.resize_with(depth + 1, AlignedBuf::default);
+        }
+        s[depth] = buf;
+    });
     out
 }
 
