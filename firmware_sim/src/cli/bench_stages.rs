@@ -206,7 +206,8 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
     let mut engine = TractEngine::open(&args.bundle)?;
     engine.set_threads(args.threads)?;
     let d = engine.dims().clone();
-    let r = ReferenceInputs::load(&args.bundle, &d)?;
+    // A bundle without a usable reference cannot be benchmarked: bad input (exit 2).
+    let r = ReferenceInputs::load(&args.bundle, &d).map_err(|e| BadArgument(format!("{e:#}")))?;
     let mut value = vec![0.0; d.value_len()];
     let mut q = vec![0.0; d.bev_len()];
     let mut w = vec![0.0; d.weights_len()];

@@ -156,9 +156,15 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
             .is_some()
         || e.downcast_ref::<crate::route_pack_builder::BuildError>()
             .is_some()
+        // A source bundle that cannot be compiled (refused, already compiled, too large for
+        // the layout, a precision it cannot take).
+        || e.downcast_ref::<satmap_runtime::bundle::compile::CompileError>()
+            .is_some()
+        || e.downcast_ref::<satmap_runtime::calibration::CalibrationFileError>()
+            .is_some()
         || matches!(
             e.downcast_ref::<crate::synth::SynthError>(),
-            Some(crate::synth::SynthError::Config(_))
+            Some(crate::synth::SynthError::Config(_) | crate::synth::SynthError::Calibration(_))
         )
     {
         return EXIT_BAD_INPUT;

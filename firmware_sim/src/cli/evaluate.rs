@@ -40,8 +40,9 @@ pub struct Args {
 /// Unreadable or malformed input files, or the report cannot be written.
 pub fn run(args: &Args) -> Result<()> {
     check_thresholds(&args.thresholds_m)?;
-    let predictions = read_file(&args.predictions)?;
-    let gt = read_file(&args.gt)?;
+    // Input files that cannot be read or scored are bad input (exit 2); writing is not.
+    let predictions = read_file(&args.predictions).map_err(|e| BadArgument(e.to_string()))?;
+    let gt = read_file(&args.gt).map_err(|e| BadArgument(e.to_string()))?;
     let report = evaluate_at(&predictions.samples, &gt.samples, &args.thresholds_m);
     print!("{}", format_report(&report));
     if let Some(path) = &args.json {

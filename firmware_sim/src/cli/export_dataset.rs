@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use safetensors::tensor::{Dtype, TensorView};
 use satmap_runtime::can_bus::can_bus;
 use satmap_runtime::satellite::SatelliteSource;
@@ -211,15 +211,26 @@ pub fn run(args: &Args) -> Result<()> {
     for (i, (a, ra)) in splits.iter().enumerate() {
         for (b, rb) in &splits[i + 1..] {
             if ra.overlaps(*rb) {
-                bail!("the {a} and {b} seed ranges overlap: a world may be in one split only");
+                return Err(BadArgument(format!(
+                    "the {a} and {b} seed ranges overlap: a world may be in one split only"
+                ))
+                .into());
             }
         }
     }
     if args.frames == 0 || args.frames > 10_000 {
-        bail!("--frames must be in 1..=10000");
+        return Err(BadArgument(format!(
+            "--frames must be in 1..=10000 (got {})",
+            args.frames
+        ))
+        .into());
     }
     if args.threads == 0 || args.threads > 64 {
-        bail!("--threads must be in 1..=64");
+        return Err(BadArgument(format!(
+            "--threads must be in 1..=64 (got {})",
+            args.threads
+        ))
+        .into());
     }
     let imagery = if args.perfect_imagery {
         ImageryConfig::perfect()
@@ -233,6 +244,9 @@ pub fn run(args: &Args) -> Result<()> {
         imagery,
         ..DriveConfig::default()
     };
+    // Before anything is written: an index.json with knobs no drive can be made with would
+    // then refuse every corrected resume.
+    config.check()?;
     std::fs::create_dir_all(&args.out).with_context(|| args.out.display().to_string())?;
     let spec = satmap_crop_spec();
     let index = Index {

@@ -32,17 +32,22 @@ pub fn built_in_layout_line() -> String {
 /// # Errors
 /// An unreadable file or an invalid layout.
 pub fn read_layout(path: Option<&Path>) -> Result<MemoryLayout> {
+    // A layout given on the command line is input: unreadable or invalid, it is bad input
+    // (exit 2); the built-in one was checked when this binary was built.
     let text = match path {
         Some(p) => satmap_runtime::host_files::read_text_capped(
             p,
             satmap_runtime::host_files::MAX_CONFIG_BYTES,
         )
-        .with_context(|| p.display().to_string())?,
+        .map_err(|e| BadArgument(format!("{}: {e}", p.display())))?,
         None => BUILT_IN_LAYOUT.to_owned(),
     };
-    MemoryLayout::parse(&text).with_context(|| match path {
-        Some(p) => p.display().to_string(),
-        None => format!("built-in layout {}", layout::SOURCE_PATH),
+    MemoryLayout::parse(&text).map_err(|e| {
+        BadArgument(match path {
+            Some(p) => format!("{}: {e}", p.display()),
+            None => format!("built-in layout {}: {e}", layout::SOURCE_PATH),
+        })
+        .into()
     })
 }
 

@@ -143,41 +143,14 @@ impl SyntheticDrive {
         config: DriveConfig,
         calibration: Calibration,
     ) -> Result<Self, SynthError> {
-        let bad = |m: &str| Err(SynthError::Config(m.to_owned()));
-        let side = MIN_IMAGE_SIDE_PX..=MAX_IMAGE_SIDE_PX;
-        if !(side.contains(&config.image_width_px) && side.contains(&config.image_height_px)) {
-            return bad("image width and height must be in 8..=4096 px");
-        }
-        if !(1..=MAX_FRAMES).contains(&config.num_frames) {
-            return bad("num_frames must be in 1..=100000");
-        }
-        if !(MIN_FRAME_RATE_HZ..=MAX_FRAME_RATE_HZ).contains(&config.frame_rate_hz) {
-            return bad("frame_rate_hz must be in [0.01, 100]");
-        }
-        if !(config.mean_speed_mps >= 0.0 && config.mean_speed_mps < 60.0) {
-            return bad("mean_speed_mps must be in [0, 60)");
-        }
-        if !(config.raster_gsd_m >= 0.05 && config.raster_gsd_m <= 2.0) {
-            return bad("raster_gsd_m must be in [0.05, 2]");
-        }
+        config.check()?;
         if !calibration.is_valid() {
-            return bad("calibration is not valid");
+            return Err(SynthError::Config("calibration is not valid".to_owned()));
         }
-        if let Some(why) = config.imagery.check() {
-            return bad(why);
-        }
-        let start_s_m = 30.0;
-        let duration_s = config.num_frames as f64 / config.frame_rate_hz;
-        let needed_m = start_s_m + duration_s * config.mean_speed_mps * 1.2 + 60.0;
-        // The world is generated and painted up front: its length bounds the work (a drive of
-        // 1e-300 Hz would otherwise ask for an unbounded road).
-        if !(config.route_length_m.is_finite()
-            && config.route_length_m.max(needed_m) <= MAX_ROUTE_LENGTH_M)
-        {
-            return bad("the drive needs a road longer than 100 km (frames / rate x speed)");
-        }
+        let start_s_m = DRIVE_START_S_M;
+        let duration_s = config.duration_s();
         let world_config = WorldConfig {
-            route_length_m: config.route_length_m.max(needed_m),
+            route_length_m: config.route_length_m.max(config.road_needed_m()),
             ..WorldConfig::default()
         };
         let world = World::generate(seed, &world_config);
@@ -442,5 +415,55 @@ impl SatelliteSource for WorldSatellite<'_> {
             }
         }
         Coverage::Full
+    }
+}
+
+/// Where on the main road a drive starts, metres.
+const DRIVE_START_S_M: f64 = 30.0;
+
+impl DriveConfig {
+    /// Every value in range and the road the drive needs finite and at most 100 km, checked
+    /// before any work (a drive of 1e-300 Hz would otherwise ask for an unbounded road).
+    ///
+    /// # Errors
+    /// [`SynthError::Config`] naming the value.
+    pub fn check(&self) -> Result<(), SynthError> {
+        let bad = |m: &str| Err(SynthError::Config(m.to_owned()));
+        let side = MIN_IMAGE_SIDE_PX..=MAX_IMAGE_SIDE_PX;
+        if !(side.contains(&self.image_width_px) && side.contains(&self.image_height_px)) {
+            return bad("image width and height must be in 8..=4096 px");
+        }
+        if !(1..=MAX_FRAMES).contains(&self.num_frames) {
+            return bad("num_frames must be in 1..=100000");
+        }
+        if !(MIN_FRAME_RATE_HZ..=MAX_FRAME_RATE_HZ).contains(&self.frame_rate_hz) {
+            return bad("frame_rate_hz must be in [0.01, 100]");
+        }
+        if !(self.mean_speed_mps >= 0.0 && self.mean_speed_mps < 60.0) {
+            return bad("mean_speed_mps must be in [0, 60)");
+        }
+        if !(self.raster_gsd_m >= 0.05 && self.raster_gsd_m <= 2.0) {
+            return bad("raster_gsd_m must be in [0.05, 2]");
+        }
+        if let Some(why) = self.imagery.check() {
+            return bad(why);
+        }
+        if !(self.route_length_m.is_finite()
+            && self.route_length_m.max(self.road_needed_m()) <= MAX_ROUTE_LENGTH_M)
+        {
+            return bad("the drive needs a road longer than 100 km (frames / rate x speed)");
+        }
+        Ok(())
+    }
+
+    /// Duration of the drive, seconds.
+    fn duration_s(&self) -> f64 {
+        self.num_frames as f64 / self.frame_rate_hz
+    }
+
+    /// Main road the drive needs: its start, the distance at up to 1.2x the mean speed, and
+    /// 60 m beyond, metres.
+    fn road_needed_m(&self) -> f64 {
+        DRIVE_START_S_M + self.duration_s() * self.mean_speed_mps * 1.2 + 60.0
     }
 }

@@ -3,6 +3,7 @@
 //! process's global allocator.
 
 mod bundle_signing_cli;
+mod cli_exit_codes;
 mod cli_refusals;
 mod common;
 mod eval_chamfer_ap;
