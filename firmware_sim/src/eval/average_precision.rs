@@ -3,15 +3,17 @@
 //! `map_utils/mean_ap.py` `eval_map` and `average_precision`) do it. Float64 throughout (MapTR
 //! stores each AP as float32; the two differ by float32 rounding only).
 //!
-//! Ties in score: MapTR orders predictions with `np.argsort(-scores)`, numpy's default
-//! (unstable) sort, so the order of equal scores depends on numpy's version and the machine's
-//! SIMD sort. Here both sorts (visiting order within a sample, ranking over all samples) are
-//! stable by descending score: equal scores keep input order, which is the order of the
-//! vectors in their sample and, across samples, the sample tokens in ascending byte order.
-//! That order can change AP (an FP ranked before a TP of the same score lowers it).
+//! Ties in score: MapTR orders predictions with `np.argsort(-scores)` over the detections of
+//! all samples stacked in the order it read them: the results file's order, its GT list paired
+//! with it by position. Here both sorts (visiting order within a sample, ranking over all
+//! samples) are stable by descending score: equal scores keep input order, which is the order
+//! of the vectors in their sample and, across samples, [`sample_order`]: the predictions file's
+//! order, then samples only the ground truth has in its order. (numpy's default sort is not
+//! stable; for the tie counts of real results it keeps this order, but a numpy version may
+//! differ on long runs of equal scores.) That order can change AP: an FP ranked before a TP of
+//! the same score lowers it.
 
-use std::collections::{BTreeMap, BTreeSet};
-
+use indexmap::{IndexMap, IndexSet};
 use serde::Serialize;
 
 use super::buffer::LineBuffer;
@@ -26,8 +28,20 @@ pub const DEFAULT_THRESHOLDS_M: [f64; 3] = [0.5, 1.0, 1.5];
 /// below 100 m (and, as in MapTR, matched above it).
 pub const NO_OVERLAP_DISTANCE_M: f64 = 100.0;
 
-/// Map elements of every sample, keyed by sample token (sorted, so results are deterministic).
-pub type SampleSet = BTreeMap<String, Vec<MapVector>>;
+/// Map elements of every sample, keyed by sample token, in the order they were read (a file's
+/// order, or the drive's frames): the order ties in score are ranked in across samples.
+pub type SampleSet = IndexMap<String, Vec<MapVector>>;
+
+/// Every sample token of an evaluation, in ranking order: the predictions' order, then the
+/// tokens only the ground truth has, in its order.
+#[must_use]
+pub fn sample_order<'a>(
+    predictions: &'a SampleSet,
+    ground_truth: &'a SampleSet,
+) -> Vec<&'a String> {
+    let order: IndexSet<&String> = predictions.keys().chain(ground_truth.keys()).collect();
+    order.into_iter().collect()
+}
 
 /// Per-class result.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -79,7 +93,7 @@ pub fn evaluate_at(
     ground_truth: &SampleSet,
     thresholds_m: &[f64],
 ) -> EvalReport {
-    let tokens: BTreeSet<&String> = predictions.keys().chain(ground_truth.keys()).collect();
+    let tokens = sample_order(predictions, ground_truth);
     let classes: Vec<ClassAp> = MapClass::ALL
         .into_iter()
         .map(|class| {

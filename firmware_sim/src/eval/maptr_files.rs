@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
-use super::average_precision::SampleSet;
+use super::average_precision::{SampleSet, sample_order};
 use super::maptr_json::{ResultsFile, ResultsFileError, VectorRecord};
 
 /// File name MapTR gives its predictions.
@@ -123,8 +123,9 @@ pub fn read_samples(path: &Path) -> Result<SampleSet, ResultsFileError> {
 }
 
 /// Write `predictions` and `ground_truth` as MapTR's results file and GT file. Both list the
-/// union of their tokens in the same (ascending) order, a sample missing from one side with no
-/// vectors, so MapTR's positional pairing matches ours. Ground-truth vectors with fewer than 2
+/// union of their tokens in the same order ([`sample_order`]: ours, so MapTR ranks ties across
+/// samples as we do), a sample missing from one side with no vectors, so MapTR's positional
+/// pairing matches ours. Ground-truth vectors with fewer than 2
 /// points are left out (MapTR's evaluator cannot make a line of them; ours skips them too). A
 /// null `meta` is written as `{}`.
 pub fn write_maptr_pair(
@@ -134,8 +135,7 @@ pub fn write_maptr_pair(
     results_path: &Path,
     gt_path: &Path,
 ) -> Result<(), ResultsFileError> {
-    let tokens: std::collections::BTreeSet<&String> =
-        predictions.keys().chain(ground_truth.keys()).collect();
+    let tokens = sample_order(predictions, ground_truth);
     let sample = |set: &SampleSet, token: &String, is_gt: bool| MaptrSample {
         sample_token: token.clone(),
         vectors: set

@@ -14,7 +14,7 @@
 //! present, must equal the number of points. Coordinates must be finite and within
 //! [`MAX_COORDINATE_M`] of the ego.
 
-use std::collections::BTreeMap;
+use indexmap::IndexMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -104,7 +104,7 @@ pub struct ResultsFile {
     pub meta: serde_json::Value,
     /// Per sample token (a token given twice is refused, not last-wins).
     #[serde(deserialize_with = "super::strict_json::unique_keys")]
-    pub results: BTreeMap<String, SampleRecord>,
+    pub results: IndexMap<String, SampleRecord>,
 }
 
 /// Vectors of one sample.

@@ -24,7 +24,7 @@ pub mod maptr_json;
 pub mod strict_json;
 
 pub use average_precision::{
-    ClassAp, DEFAULT_THRESHOLDS_M, EvalReport, SampleSet, evaluate, evaluate_at,
+    ClassAp, DEFAULT_THRESHOLDS_M, EvalReport, SampleSet, evaluate, evaluate_at, sample_order,
 };
 pub use map_vector::{MapClass, MapVector};
 pub use maptr_files::{Layout, LoadedFile, read_file, read_samples, write_maptr_pair};

@@ -207,21 +207,63 @@ fn tied_scores_are_matched_in_input_order() {
 }
 
 #[test]
-fn tied_scores_across_samples_rank_by_token() {
+fn tied_scores_across_samples_rank_in_file_order() {
     // Sample "a": a prediction and no GT (FP). Sample "b": a perfect prediction (TP). Both 0.5.
-    // Tokens in ascending order: FP, TP -> AP 0.5. Swap the tokens: TP, FP -> AP 1.
+    // Issue 38: MapTR stacks the samples in its results file's order; so do we, whatever the
+    // tokens sort as. "a" listed first: FP, TP -> AP 0.5. "b" listed first: TP, FP -> AP 1
+    // (until then both gave 0.5: the tokens were ranked in ascending order).
     let fp = vertical(MapClass::Divider, 0.0, 0.5);
     let tp = vertical(MapClass::Divider, 0.0, 0.5);
-    let gt_line = vertical(MapClass::Divider, 0.0, 1.0);
-    let pred = SampleSet::from([
+    let gt = one("b", vec![vertical(MapClass::Divider, 0.0, 1.0)]);
+    let a_first = SampleSet::from([
         ("a".to_owned(), vec![fp.clone()]),
         ("b".to_owned(), vec![tp.clone()]),
     ]);
-    let gt = one("b", vec![gt_line.clone()]);
-    assert_eq!(evaluate_at(&pred, &gt, &[1.0]).classes[D].ap, 0.5);
-    let pred = SampleSet::from([("a".to_owned(), vec![tp]), ("b".to_owned(), vec![fp])]);
-    let gt = one("a", vec![gt_line]);
-    assert_eq!(evaluate_at(&pred, &gt, &[1.0]).classes[D].ap, 1.0);
+    assert_eq!(evaluate_at(&a_first, &gt, &[1.0]).classes[D].ap, 0.5);
+    let b_first = SampleSet::from([("b".to_owned(), vec![tp]), ("a".to_owned(), vec![fp])]);
+    assert_eq!(evaluate_at(&b_first, &gt, &[1.0]).classes[D].ap, 1.0);
+
+    // Through files: MapTR's list layout and our keyed layout keep the file's order, and
+    // `--write-maptr` writes the order the evaluation ranked in.
+    let dir = scratch("file_order");
+    let line = r#"{"pts": [[0.0, -10.0], [0.0, 10.0]], "pts_num": 2, "cls_name": "divider",
+        "type": 0, "confidence_level": 0.5}"#;
+    let maptr = write(
+        &dir,
+        "maptr.json",
+        &format!(
+            r#"{{"meta": {{}}, "results": [{{"sample_token": "b", "vectors": [{line}]}},
+            {{"sample_token": "a", "vectors": [{line}]}}]}}"#
+        ),
+    );
+    let keyed = write(
+        &dir,
+        "keyed.json",
+        r#"{"results": {"b": {"vectors": [{"pts": [[0.0, -10.0], [0.0, 10.0]],
+            "cls_name": "divider", "confidence_level": 0.5}]},
+            "a": {"vectors": [{"pts": [[0.0, -10.0], [0.0, 10.0]], "cls_name": "divider",
+            "confidence_level": 0.5}]}}}"#,
+    );
+    for path in [&maptr, &keyed] {
+        let read = read_samples(path).unwrap();
+        let order: Vec<&str> = read.keys().map(String::as_str).collect();
+        assert_eq!(order, ["b", "a"], "{}", path.display());
+        assert_eq!(evaluate_at(&read, &gt, &[1.0]).classes[D].ap, 1.0);
+    }
+    let (results, gts) = (dir.join("r.json"), dir.join("g.json"));
+    write_maptr_pair(
+        &read_samples(&maptr).unwrap(),
+        &gt,
+        serde_json::Value::Null,
+        &results,
+        &gts,
+    )
+    .unwrap();
+    let back: Vec<String> = read_samples(&results).unwrap().keys().cloned().collect();
+    assert_eq!(back, ["b", "a"]);
+    let back: Vec<String> = read_samples(&gts).unwrap().keys().cloned().collect();
+    assert_eq!(back, ["b", "a"]);
+    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// MapTR's `nuscmap_results.json` as `_format_bbox` writes it.
