@@ -7,6 +7,7 @@ mod cli_exit_codes;
 mod cli_refusals;
 mod common;
 mod eval_chamfer_ap;
+mod eval_geos_buffer;
 mod eval_maptr_protocol;
 mod export_dataset;
 mod harness_clock;

@@ -4,8 +4,10 @@
 //! `tpfp.py` `custom_tpfp_gen`; shapely 1.8.5 `LineString(pts).buffer(2., cap_style=flat,
 //! join_style=mitre)`, mitre limit 5, on GEOS 3.10).
 //!
-//! The buffering is geo's [`Buffer`] (i_overlay underneath), which has the same cap and join
-//! styles. Its polygon is not GEOS's in these places:
+//! An open polyline's buffer is GEOS's own construction: its raw offset curve
+//! (`geos_line_curve`, ported from GEOS 3.10) resolved to the region it winds around at least
+//! once (i_overlay's positive fill rule; GEOS keeps depth >= 1). Until issue 38 it was geo's
+//! [`Buffer`], whose polygon is not GEOS's in these places (rings still use it, see below):
 //! - Corners sharper than the mitre limit (interior angle below `2 asin(1 / 5)` = 23.07 deg):
 //!   GEOS cuts the mitre 5 x 2 m from the vertex along the bisector; geo cuts it where each
 //!   offset edge has run `2 m / tan(11.54 deg)` = 9.80 m past the vertex, 9.80 m to 10 m along
@@ -16,18 +18,24 @@
 //! - GEOS first simplifies the input by 1 % of the distance (2 cm); geo snaps to an integer grid
 //!   of about 1e-7 of the geometry's extent.
 //!
-//! The intersect decision is what the metric uses, and there they agreed on all of 20,000
-//! random pairs of resampled lines, rings, short segments, hairpins and zero-length lines
-//! (9,211 intersecting) checked against shapely 1.8.5.post1 / GEOS 3.10.3, MapTR's pinned
-//! version.
+//! The intersect decision is what the metric uses. geo's buffer agreed with GEOS on all of
+//! 20,000 random pairs of resampled lines, rings, short segments, hairpins and zero-length lines
+//! (9,211 intersecting), but not on short hooked lines (17 of 20,000 pairs decided otherwise:
+//! where a flat cap cuts across the band of a line shorter than the band is wide). The GEOS
+//! curve agrees on every pair of `tests/geos_buffer/pairs.json` (shapely 1.8.5.post1 / GEOS
+//! 3.10.3, MapTR's pinned versions; `firmware_sim/tests/sim/eval_geos_buffer.rs`).
 //!
 //! Closed polylines (first point = last point, at least 4 distinct points) are buffered as GEOS
 //! 3.9+ does: as a ring on both sides, with a mitre join at the closing vertex instead of two flat
 //! caps. A polyline of zero length has an empty buffer (flat caps give no area), so it intersects
 //! nothing and is never matched.
 
+mod geos_line_curve;
+
 use geo::algorithm::buffer::{BufferStyle, LineCap, LineJoin};
 use geo::{Area, BooleanOps, Buffer, Coord, Intersects, LineString, MultiPolygon, Polygon};
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::float::simplify::SimplifyShape;
 
 /// Buffer distance on each side of a polyline, metres (MapTR's `linewidth=2.`: a 4 m wide band).
 pub const BUFFER_DISTANCE_M: f64 = 2.0;
@@ -61,7 +69,7 @@ impl LineBuffer {
             }
         }
         Self {
-            polygons: line.buffer_with_style(style(BUFFER_DISTANCE_M)),
+            polygons: geos_line_buffer(&line.0),
         }
     }
 
@@ -92,6 +100,29 @@ fn style(distance_m: f64) -> BufferStyle<f64> {
     BufferStyle::new(distance_m)
         .line_cap(LineCap::Butt)
         .line_join(LineJoin::Miter(2.0 * (1.0 / MITRE_LIMIT).asin()))
+}
+
+/// An open polyline's buffer as GEOS 3.10 makes it: the region its raw offset curve winds around
+/// at least once. The curve is clockwise around the band, which i_overlay counts as negative
+/// winding.
+fn geos_line_buffer(points: &[Coord<f64>]) -> MultiPolygon<f64> {
+    let curve = geos_line_curve::raw_line_curve(points, BUFFER_DISTANCE_M, MITRE_LIMIT);
+    if curve.len() < 4 {
+        return MultiPolygon(Vec::new());
+    }
+    let contour: Vec<[f64; 2]> = curve.iter().map(|c| [c.x, c.y]).collect();
+    let shapes = contour.as_slice().simplify_shape(FillRule::Negative);
+    let ring =
+        |path: &Vec<[f64; 2]>| LineString::new(path.iter().map(|&[x, y]| Coord { x, y }).collect());
+    MultiPolygon(
+        shapes
+            .iter()
+            .filter_map(|shape| {
+                let (outer, holes) = shape.split_first()?;
+                Some(Polygon::new(ring(outer), holes.iter().map(ring).collect()))
+            })
+            .collect(),
+    )
 }
 
 /// GEOS's `isRing` after removing repeated points: closed, at least 4 points.
