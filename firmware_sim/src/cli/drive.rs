@@ -18,6 +18,7 @@ use anyhow::{Context, Result};
 use satmap_runtime::capacity::layout;
 
 use crate::arena::ArenaAllocator;
+use crate::eval::ResultsFile;
 use crate::cli::build_pack::CodecArg;
 use crate::harness::{
     DEFAULT_MAX_DEGRADED_SHARE, EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError,
@@ -396,6 +397,11 @@ pub fn check_args(args: &Args) -> Result<(usize, usize, f64), BadArgument> {
     Ok((arena_bytes, step_scratch_bytes, rate_hz))
 }
 
+/// Every step's predictions in `drive --out`, our results layout.
+pub const PREDICTIONS_FILE: &str = "predictions.json";
+/// Every step's ground truth in `drive --out`, our results layout.
+pub const GROUND_TRUTH_FILE: &str = "ground_truth.json";
+
 fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| out.display().to_string())?;
     let write = |name: &str, bytes: &[u8]| -> Result<()> {
@@ -420,6 +426,12 @@ fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {
         let p = out.join("cameras.png");
         sheet.save(&p).with_context(|| p.display().to_string())?;
     }
+    // Every step's map and truth in our results layout: what `evaluate` (and a fleet's merged
+    // evaluation over many drives) scores.
+    let meta = serde_json::json!({"bundle": outcome.report.bundle, "scenario": outcome.report.scenario});
+    ResultsFile::from_samples(&outcome.predictions, meta, true).write(&out.join(PREDICTIONS_FILE))?;
+    ResultsFile::from_samples(&outcome.truth, serde_json::Value::Null, false)
+        .write(&out.join(GROUND_TRUTH_FILE))?;
     write(
         "predictions.geojson",
         route_frame_geojson(outcome.features.clone())

@@ -2,6 +2,11 @@
 //! MapTR's own layout (`{"results": [...]}`, `{"GTs": [...]}`) or ours (`{"results": {token:
 //! ...}}`), told apart by content (`eval::maptr_files`); prints the table, optionally writes the
 //! report as JSON and both inputs as MapTR's files.
+//!
+//! Several drives at once: `--predictions` and `--gt` repeated, paired by position; the samples
+//! of all pairs are pooled into one evaluation (AP from the merged matches, as MapTR computes it
+//! over a dataset; not a mean of per-drive APs), each token prefixed with its pair's index
+//! (`0/000003`) so that frames of different drives never share a token.
 
 use std::path::PathBuf;
 
@@ -10,18 +15,19 @@ use anyhow::{Context, Result};
 use crate::cli::drive::BadArgument;
 use crate::eval::average_precision::NO_OVERLAP_DISTANCE_M;
 use crate::eval::maptr_files::{MAPTR_GT_FILE, MAPTR_RESULTS_FILE};
-use crate::eval::{EvalReport, evaluate_at, read_file, write_maptr_pair};
+use crate::eval::{EvalReport, LoadedFile, SampleSet, evaluate_at, read_file, write_maptr_pair};
 
 /// Arguments of `evaluate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Predictions: MapTR's `nuscmap_results.json`, or our layout (with `confidence_level`).
-    #[arg(long)]
-    pub predictions: PathBuf,
+    /// Repeat for several drives, in the order of their `--gt`.
+    #[arg(long, required = true)]
+    pub predictions: Vec<PathBuf>,
     /// Ground truth: MapTR's `{"GTs": [...]}` file, or our layout (e.g. a scenario's
-    /// `ground_truth.json`; `confidence_level` optional).
-    #[arg(long)]
-    pub gt: PathBuf,
+    /// `ground_truth.json`; `confidence_level` optional). Repeat for several drives.
+    #[arg(long, required = true)]
+    pub gt: Vec<PathBuf>,
     /// Chamfer thresholds, metres.
     #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 1.5])]
     pub thresholds_m: Vec<f64>,
@@ -40,9 +46,15 @@ pub struct Args {
 /// Unreadable or malformed input files, or the report cannot be written.
 pub fn run(args: &Args) -> Result<()> {
     check_thresholds(&args.thresholds_m)?;
-    // Input files that cannot be read or scored are bad input (exit 2); writing is not.
-    let predictions = read_file(&args.predictions).map_err(|e| BadArgument(e.to_string()))?;
-    let gt = read_file(&args.gt).map_err(|e| BadArgument(e.to_string()))?;
+    if args.predictions.len() != args.gt.len() {
+        return Err(BadArgument(format!(
+            "{} --predictions files but {} --gt files: give them in pairs, one of each per drive",
+            args.predictions.len(),
+            args.gt.len()
+        ))
+        .into());
+    }
+    let (predictions, gt) = read_pairs(&args.predictions, &args.gt)?;
     let report = evaluate_at(&predictions.samples, &gt.samples, &args.thresholds_m);
     print!("{}", format_report(&report));
     if let Some(path) = &args.json {
@@ -60,6 +72,33 @@ pub fn run(args: &Args) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// Every pair's files read (bad input, exit 2, when one cannot be read or scored) and, for more
+/// than one pair, pooled with their tokens prefixed by the pair's index.
+fn read_pairs(predictions: &[PathBuf], gt: &[PathBuf]) -> Result<(LoadedFile, LoadedFile)> {
+    let read = |p: &PathBuf| read_file(p).map_err(|e| BadArgument(e.to_string()));
+    if let ([p], [g]) = (predictions, gt) {
+        return Ok((read(p)?, read(g)?));
+    }
+    let mut merged: Option<(LoadedFile, LoadedFile)> = None;
+    for (i, (p, g)) in predictions.iter().zip(gt).enumerate() {
+        let (p, g) = (read(p)?, read(g)?);
+        let (mp, mg) = merged.get_or_insert_with(|| {
+            let empty = |f: &LoadedFile| LoadedFile {
+                layout: f.layout,
+                meta: f.meta.clone(),
+                samples: SampleSet::new(),
+            };
+            (empty(&p), empty(&g))
+        });
+        for (from, into) in [(p.samples, &mut mp.samples), (g.samples, &mut mg.samples)] {
+            for (token, vectors) in from {
+                into.insert(format!("{i}/{token}"), vectors);
+            }
+        }
+    }
+    merged.ok_or_else(|| BadArgument("no --predictions / --gt pair given".into()).into())
 }
 
 /// The report as a text table (AP in percent, like the papers).

@@ -128,4 +128,8 @@ pub struct Replay {
     pub features: Vec<geojson::Feature>,
     /// Every step's published map, in step order (what [`crate::eval::deviation`] compares).
     pub maps: Vec<satmap_runtime::map_frame::MapFrame>,
+    /// Every step's predictions (ego metres) by frame name, in step order.
+    pub predictions: crate::eval::SampleSet,
+    /// Every step's ground truth (ego metres) by frame name, in step order.
+    pub truth: crate::eval::SampleSet,
 }

@@ -333,5 +333,7 @@ pub fn replay(
         last,
         features,
         maps,
+        predictions,
+        truth,
     })
 }
