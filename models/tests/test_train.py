@@ -21,7 +21,7 @@ from satmap_ref.train.loop import TrainArgs, lr_factor, train, train_step
 from satmap_ref.train.losses import frame_loss, layer_losses
 from satmap_ref.train.matcher import match, ordered_pts_cost
 from satmap_ref.train.predict import predict_split
-from satmap_ref.train.sampler import EpochSampler
+from satmap_ref.train.sampler import ShardSampler
 from satmap_ref.train.targets import build_targets, normalize_pts, resample_polyline
 
 CFG = get_config("test")
@@ -186,13 +186,33 @@ def test_dataset_reader_reads_contract(tmp_path):
 
 
 def test_sampler_epochs_and_state():
-    a = EpochSampler(5, seed=3)
-    first = a.draw(5)
-    assert sorted(first) == list(range(5))
-    a.draw(2)
-    b = EpochSampler(5, seed=99)
+    a = ShardSampler(9, seed=3, batch=4)
+    first = a.next_batch() + a.next_batch()
+    assert len(set(first)) == 8  # one epoch draws without replacement; the ninth frame waits
+    a.next_batch()  # the next epoch: a new permutation
+    assert a.epoch == 1
+    b = ShardSampler(9, seed=99, batch=4)
     b.load_state_dict(json.loads(json.dumps(a.state_dict())))
-    assert a.draw(7) == b.draw(7)
+    assert [a.next_batch() for _ in range(5)] == [b.next_batch() for _ in range(5)]
+
+
+def test_sampler_shards_the_same_global_batches_at_any_world_size():
+    # One process with batch 4 and two ranks with batch 2 draw the same frames per update, over
+    # epoch boundaries; a 2-rank state resumes in one process.
+    one = ShardSampler(11, seed=5, batch=4)
+    ranks = [ShardSampler(11, seed=5, batch=2, world_size=2, rank=r) for r in range(2)]
+    for _ in range(7):
+        shards = [r.next_batch() for r in ranks]
+        assert sorted(one.next_batch()) == sorted(shards[0] + shards[1])
+        assert not set(shards[0]) & set(shards[1])
+    resumed = ShardSampler(11, seed=0, batch=4)
+    resumed.load_state_dict(ranks[0].state_dict())
+    assert resumed.next_batch() == one.next_batch()
+    with pytest.raises(ValueError, match="multiple of 3"):
+        ShardSampler(11, seed=5, batch=1, world_size=3).load_state_dict(
+            {**ranks[0].state_dict(), "pos": 4})
+    with pytest.raises(ValueError, match="cannot fill"):
+        ShardSampler(3, seed=0, batch=2, world_size=2)
 
 
 def test_lr_schedule():

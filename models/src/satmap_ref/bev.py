@@ -194,8 +194,8 @@ def torch_gather_sum(value: torch.Tensor, weights: torch.Tensor, mask: torch.Ten
     q_n, n_k, n_p = weights.shape
     dh = d // n_k
     v = value.view(n_c, hw, n_k, dh)
-    out = torch.zeros(q_n, n_k, dh, dtype=value.dtype)
-    heads = torch.arange(n_k).view(1, n_k, 1)
+    out = torch.zeros(q_n, n_k, dh, dtype=value.dtype, device=value.device)
+    heads = torch.arange(n_k, device=value.device).view(1, n_k, 1)
     for c in range(n_c):
         idx = index[c].clamp(min=0).to(torch.int64)  # [Q, K, P]
         g = v[c][idx, heads.expand(q_n, n_k, n_p)]  # [Q, K, P, dh]

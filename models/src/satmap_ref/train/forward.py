@@ -30,6 +30,10 @@ class LutTensors:
     count: torch.Tensor
     index: torch.Tensor
 
+    def to(self, device: torch.device) -> LutTensors:
+        """The same table on `device`."""
+        return LutTensors(self.mask.to(device), self.count.to(device), self.index.to(device))
+
 
 def load_lut(cfg: SatMapConfig, calibration: Path = DEFAULT_CALIBRATION) -> LutTensors:
     """The LUT of the rig the dataset was rendered with (the committed calibration)."""
@@ -53,16 +57,21 @@ def _bevs(model: SatMap, lut: LutTensors, sample: Sample, mode: str
     if mode not in MODES:
         raise ValueError(f"mode {mode!r}, want one of {MODES}")
     st = model.stages
-    images = torch.from_numpy(np.ascontiguousarray(sample.images))
+    dev = next(model.parameters()).device
+
+    def tensor(a: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a)).to(dev)
+
+    images = tensor(sample.images)
     value = torch.stack([
-        st["image_encoder"](images[c], torch.tensor([c], dtype=torch.int64))
+        st["image_encoder"](images[c], torch.tensor([c], dtype=torch.int64, device=dev))
         for c in range(images.shape[0])
     ])
-    bev_query, w = st["bev_query"](torch.from_numpy(np.ascontiguousarray(sample.can_bus)))
+    bev_query, w = st["bev_query"](tensor(sample.can_bus))
     gathered = torch_gather_sum(value, w, lut.mask, lut.count, lut.index)
     camera_bev = st["bev_encoder"](bev_query, gathered)
     if mode == "sat":
-        sat_bev = st["satellite_encoder"](torch.from_numpy(np.ascontiguousarray(sample.satellite)))
+        sat_bev = st["satellite_encoder"](tensor(sample.satellite))
     else:
         sat_bev = torch.zeros_like(camera_bev)
     return camera_bev, sat_bev

@@ -38,26 +38,29 @@ def layer_losses(logits: torch.Tensor, pts: torch.Tensor, targets: MapTargets,
     """Losses of one decoder layer: logits [P, C], pts [P, n, 2] (normalised). Each loss is a sum
     divided by `avg_factor` (MapTR: the number of positives in the batch, at least 1), so the
     frames of a batch can be accumulated."""
-    labels = torch.from_numpy(targets.labels)
-    shifts_m = torch.from_numpy(targets.shifts_m)
-    mask = torch.from_numpy(targets.shift_mask)
+    dev = logits.device
+    labels = torch.from_numpy(targets.labels).to(dev)
+    shifts_m = torch.from_numpy(targets.shifts_m).to(dev)
+    mask = torch.from_numpy(targets.shift_mask).to(dev)
     m, _ = match(logits.detach(), pts.detach(), labels, normalize_pts(shifts_m, pc_range_m), mask)
     target = torch.zeros_like(logits)
-    pred_i = torch.from_numpy(m.pred)
+    pred_i = torch.from_numpy(m.pred).to(dev)
+    gt_i = torch.from_numpy(m.gt).to(dev)
     if m.num_pos:
-        target[pred_i, labels[torch.from_numpy(m.gt)]] = 1.0
+        target[pred_i, labels[gt_i]] = 1.0
     loss_cls = sigmoid_focal_loss(logits, target).sum() * (weights.cls / avg_factor)
     if m.num_pos == 0:
         zero = pts.sum() * 0.0
         return {"loss_cls": loss_cls, "loss_pts": zero, "loss_dir": zero}, m
-    tgt_m = shifts_m[torch.from_numpy(m.gt), torch.from_numpy(m.shift)]  # [M, n, 2] metres
+    tgt_m = shifts_m[gt_i, torch.from_numpy(m.shift).to(dev)]  # [M, n, 2] metres
     pred = pts[pred_i]
     loss_pts = (pred - normalize_pts(tgt_m, pc_range_m)).abs().sum() * (weights.pts / avg_factor)
     # MapTR's PtsDirCosLoss: direction vectors of the de-normalised prediction vs the GT (metres).
     pd = denormalize_pts(pred, pc_range_m)
     pd = (pd[:, 1:] - pd[:, :-1]).reshape(-1, 2)
     td = (tgt_m[:, 1:] - tgt_m[:, :-1]).reshape(-1, 2)
-    cos = F.cosine_embedding_loss(pd, td, torch.ones(pd.shape[0]), reduction="none")
+    cos = F.cosine_embedding_loss(pd, td, torch.ones(pd.shape[0], device=dev),
+                                  reduction="none")
     loss_dir = cos.sum() * (weights.dir / avg_factor)
     return {"loss_cls": loss_cls, "loss_pts": loss_pts, "loss_dir": loss_dir}, m
 

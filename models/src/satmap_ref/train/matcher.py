@@ -65,8 +65,8 @@ def match(logits: torch.Tensor, pts: torch.Tensor, labels: torch.Tensor, shifts:
             return Match(e, e, e), logits.new_zeros((logits.shape[0], 0))
         pc, order = ordered_pts_cost(pts, shifts, shift_mask)
         cost = focal_cost(logits, labels) + pc
-        rows, cols = linear_sum_assignment(cost.double().numpy())
+        rows, cols = linear_sum_assignment(cost.double().cpu().numpy())
         rows = rows.astype(np.int64)
         cols = cols.astype(np.int64)
-        shift = order[torch.from_numpy(rows), torch.from_numpy(cols)].numpy().astype(np.int64)
+        shift = order.cpu()[torch.from_numpy(rows), torch.from_numpy(cols)].numpy().astype(np.int64)
     return Match(rows, cols, shift), cost
