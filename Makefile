@@ -96,7 +96,7 @@ test-python: venv
 # the layout is a build input, so this rebuilds the workspace crates only, and the next build
 # without it rebuilds them back) and drive PAPER_FRAMES frames through SatMap in the arena; fails
 # when the drive does (a region too small, the arena exhausted, a budget exceeded). In `test`
-# after test-rust, so CI builds both layouts. See README "Memory layout per product variant".
+# after test-rust, so CI builds both layouts. See docs/ecu-integration.md "Memory layout per product variant".
 # The binary comes from the same `cargo test --workspace` command as test-rust (an integration
 # test of satmap-sim makes cargo build it): `cargo run -p satmap-sim` would resolve dependency
 # features for that one package and recompile tract (~8 min of CI).
@@ -186,7 +186,7 @@ train: venv
 	cp $(RUNS)/camera/weights.safetensors models/weights/test_camera.safetensors
 	$(PY) -m satmap_ref.golden --take-input $(DATA)
 
-# The ECU's processors, under emulation (README "Targets"; targets/README.md). The toolchain comes
+# The ECU's processors, under emulation (docs/targets.md; targets/README.md). The toolchain comes
 # from Debian's packages only: a trixie chroot with Rust 1.96, aarch64's std, the std sources
 # for -Z build-std, the aarch64 GCC and qemu, cached outside the repository
 # (/var/cache/satmap-cross; idempotent, ~4 min the first time).

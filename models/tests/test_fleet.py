@@ -4,7 +4,8 @@ and retried by Ray; the merged report equals the sequential replay's: every driv
 equal, the merged mAP equal to `satmap-sim evaluate` over all the sequential drives' files.
 
 The binary is `$SATMAP_SIM` or the one `make test` builds (`target/debug/satmap-sim`); without
-it the test fails, naming it. Bounded in time: 2 frames a drive (about 40 s here)."""
+it the test fails, naming it. Bounded in time: 2 frames a drive (about 40 s here), and the
+fleet cancels what has not finished after 600 s (then the drives count as failed)."""
 
 import json
 import os
@@ -43,7 +44,7 @@ def test_fleet_with_a_killed_worker_equals_the_sequential_replay(sim, tmp_path):
     drives = parse_drives("seeds=3000..3006")
     marker = tmp_path / "killed_once"
     report = run_fleet(sim, BUNDLE, drives, FRAMES, tmp_path / "fleet", workers=2, retries=3,
-                       kill_once_marker=str(marker), progress=False)
+                       kill_once_marker=str(marker), progress=False, timeout_s=600)
     assert marker.exists(), "no worker was killed: the retry path did not run"
     assert report["failed_drives"] == []
     assert report["drives"] == 6 and report["steps"] == 6 * FRAMES

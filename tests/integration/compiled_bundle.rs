@@ -417,7 +417,7 @@ fn a_quantised_onnx_folder_is_refused() {
 /// Bounds on a lower precision's maps against the f32 bundle's over the first 8 steps of the
 /// default synthetic drive (seed 1, 8 m/s, 2 Hz; `satmap-sim drive --bundle <other> --frames 8
 /// --deviation-from models/bundles/test.satmap` prints the same figures). The Chamfer and mAP
-/// bounds are the product's acceptance line for a precision (README, "Precision"); the share
+/// bounds are the product's acceptance line for a precision (docs/bundles.md, "Precision"); the share
 /// bound is three times the measured one.
 struct MapBounds {
     mean_chamfer_m: f64,

@@ -18,8 +18,8 @@ use anyhow::{Context, Result};
 use satmap_runtime::capacity::layout;
 
 use crate::arena::ArenaAllocator;
-use crate::eval::ResultsFile;
 use crate::cli::build_pack::CodecArg;
+use crate::eval::ResultsFile;
 use crate::harness::{
     DEFAULT_MAX_DEGRADED_SHARE, EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError,
     MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, ReplayConfig, RouteReplayConfig, ScenarioInput, replay,
@@ -428,8 +428,10 @@ fn write_outputs(out: &Path, outcome: &crate::harness::Replay) -> Result<()> {
     }
     // Every step's map and truth in our results layout: what `evaluate` (and a fleet's merged
     // evaluation over many drives) scores.
-    let meta = serde_json::json!({"bundle": outcome.report.bundle, "scenario": outcome.report.scenario});
-    ResultsFile::from_samples(&outcome.predictions, meta, true).write(&out.join(PREDICTIONS_FILE))?;
+    let meta =
+        serde_json::json!({"bundle": outcome.report.bundle, "scenario": outcome.report.scenario});
+    ResultsFile::from_samples(&outcome.predictions, meta, true)
+        .write(&out.join(PREDICTIONS_FILE))?;
     ResultsFile::from_samples(&outcome.truth, serde_json::Value::Null, false)
         .write(&out.join(GROUND_TRUTH_FILE))?;
     write(

@@ -1,5 +1,5 @@
 //! How far a lower-precision bundle's maps are from the f32 bundle's over one replay: the figures
-//! the precision table reports (README, "Precision").
+//! the precision table reports (docs/bundles.md, "Precision").
 //!
 //! Elements are matched by decoder instance, the identity both runs share: an f32 element
 //! (instance, class) in a step's top-k is *kept* when the other run's top-k holds the same

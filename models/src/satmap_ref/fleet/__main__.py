@@ -30,8 +30,10 @@ from .worker import run_drive
 
 def run_fleet(sim: Path, bundle: Path, drives: list[Drive], frames: int, out: Path,
               address: str | None = None, workers: int = 2, retries: int = 3,
-              kill_once_marker: str | None = None, progress: bool = True) -> dict:
-    """Run `drives` on Ray and write the merged report into `out`; returns it."""
+              kill_once_marker: str | None = None, progress: bool = True,
+              timeout_s: float | None = None) -> dict:
+    """Run `drives` on Ray and write the merged report into `out`; returns it. With
+    `timeout_s`, drives not finished by then are cancelled and reported as failed."""
     import ray
 
     started = address in (None, "local")
@@ -48,8 +50,15 @@ def run_fleet(sim: Path, bundle: Path, drives: list[Drive], frames: int, out: Pa
         pending = [task.remote(*shipped, d, frames, kill_once_marker) for d in drives]
         results, failures = [], []
         bar = tqdm(total=len(drives), disable=not progress, desc="fleet", unit="drive")
+        deadline = None if timeout_s is None else t0 + timeout_s
         while pending:
-            done, pending = ray.wait(pending, num_returns=1)
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            done, pending = ray.wait(pending, num_returns=1, timeout=left)
+            if not done:
+                for ref in pending:
+                    ray.cancel(ref, force=True)
+                failures += [f"not finished within {timeout_s} s"] * len(pending)
+                break
             try:
                 results.append(ray.get(done[0]))
             except Exception as e:  # a drive that failed after its retries: named, not fatal
@@ -83,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="local (default: start Ray here), auto, or HOST:PORT of a head")
     ap.add_argument("--workers", type=int, default=2, help="CPUs of a local Ray")
     ap.add_argument("--retries", type=int, default=3, help="retries of a drive whose worker dies")
+    ap.add_argument("--timeout-s", type=float, default=None,
+                    help="cancel the drives not finished this long after the start (failed)")
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--chaos-kill-once", default=None, metavar="MARKER",
                     help="fault injection: the first task to find MARKER absent kills its worker")
@@ -100,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     report = run_fleet(a.sim, a.bundle, drives, a.frames, a.out, a.address, a.workers,
-                       a.retries, a.chaos_kill_once, not a.no_progress)
+                       a.retries, a.chaos_kill_once, not a.no_progress, a.timeout_s)
     print(to_text(report), end="")
     print(f"wall time {report['wall_s']:.1f} s on {a.workers} workers; report "
           f"{a.out / 'fleet_report.json'}")

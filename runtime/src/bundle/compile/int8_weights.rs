@@ -15,7 +15,7 @@
 //! optimiser folds each widening once, so the step runs the same f32 kernels on weights rounded
 //! to int8. It folds only weights whose f32 form stays under 4 MiB (tract-core's
 //! `CONST_FOLD_MEM_BUDGET`): larger ones (`nano`'s) stay int8 in RAM and are widened every step,
-//! less memory for a slower step (README, "Precision").
+//! less memory for a slower step (docs/bundles.md, "Precision").
 //!
 //! What stays f32, and why: biases, norms' gains and every tensor of fewer than
 //! [`MIN_INT8_ELEMENTS`] elements or of rank 1 (a few kB in all, and the first to move a
