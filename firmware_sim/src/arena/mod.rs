@@ -16,17 +16,17 @@
 //!
 //! Once [`ArenaAllocator::init_step_scratch`] gave it the per-step scratch region, everything
 //! allocated while the label is [`ArenaRegion::Step`] (on any thread: the engine's worker
-//! threads too) comes from that region instead of the arena ([`step_scratch`]).
+//! threads too) comes from that region instead of the arena ([`CountingHeap`] explains why).
 
-mod step_scratch;
+mod counting_heap;
 mod storage;
 pub mod system_malloc;
 
-pub use step_scratch::{StepScratch, StepScratchStats};
+pub use counting_heap::{CountingHeap, HeapStats};
 pub use storage::ArenaStorage;
 
 use core::alloc::{GlobalAlloc, Layout};
-use core::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::alloc::System;
 use std::io::Write;
 
@@ -82,7 +82,7 @@ pub struct ArenaStats {
     /// Number of allocations (including reallocations) the arena served since `init`.
     pub allocations: usize,
     /// The per-step scratch region's counters.
-    pub step_scratch: StepScratchStats,
+    pub step_scratch: HeapStats,
 }
 
 impl ArenaStats {
@@ -93,18 +93,12 @@ impl ArenaStats {
     }
 }
 
-/// Counting TLSF global allocator over a fixed arena.
+/// Counting TLSF global allocator over a fixed arena, with a second heap for steps.
 pub struct ArenaAllocator {
-    heap: embedded_alloc::TlsfHeap,
-    ready: AtomicBool,
-    start: AtomicUsize,
-    end: AtomicUsize,
-    current: AtomicUsize,
-    peak: AtomicUsize,
-    allocations: AtomicUsize,
+    arena: CountingHeap,
+    step_scratch: CountingHeap,
     host_side: AtomicBool,
     region: AtomicU8,
-    step_scratch: StepScratch,
 }
 
 impl ArenaAllocator {
@@ -112,23 +106,17 @@ impl ArenaAllocator {
     #[must_use]
     pub const fn new() -> Self {
         Self {
-            heap: embedded_alloc::TlsfHeap::empty(),
-            ready: AtomicBool::new(false),
-            start: AtomicUsize::new(0),
-            end: AtomicUsize::new(0),
-            current: AtomicUsize::new(0),
-            peak: AtomicUsize::new(0),
-            allocations: AtomicUsize::new(0),
+            arena: CountingHeap::new(),
+            step_scratch: CountingHeap::new(),
             host_side: AtomicBool::new(false),
             region: AtomicU8::new(0),
-            step_scratch: StepScratch::new(),
         }
     }
 
     /// True once [`init`](Self::init) succeeded.
     #[must_use]
     pub fn is_ready(&self) -> bool {
-        self.ready.load(Ordering::Acquire)
+        self.arena.is_ready()
     }
 
     /// Label what the following allocations are for (named if the arena runs out).
@@ -160,17 +148,7 @@ impl ArenaAllocator {
         storage: &'static ArenaStorage<BYTES>,
         size_bytes: usize,
     ) -> bool {
-        if size_bytes == 0 || size_bytes > BYTES || self.ready.load(Ordering::Acquire) {
-            return false;
-        }
-        let start = storage.start();
-        // SAFETY: `storage` is 'static, unused by anyone else (it is only ever passed here, and
-        // `ready` guards against a second call), and `size_bytes <= BYTES`.
-        unsafe { self.heap.init(start, size_bytes) };
-        self.start.store(start, Ordering::Relaxed);
-        self.end.store(start + size_bytes, Ordering::Relaxed);
-        self.ready.store(true, Ordering::Release);
-        true
+        self.arena.init(storage, size_bytes)
     }
 
     /// Give steps their own region: from now on allocations labelled [`ArenaRegion::Step`]
@@ -192,31 +170,19 @@ impl ArenaAllocator {
     /// Current counters.
     #[must_use]
     pub fn stats(&self) -> ArenaStats {
-        let ready = self.ready.load(Ordering::Acquire);
+        let a = self.arena.stats();
         ArenaStats {
-            capacity_bytes: if ready {
-                self.end.load(Ordering::Relaxed) - self.start.load(Ordering::Relaxed)
-            } else {
-                0
-            },
-            current_bytes: self.current.load(Ordering::Relaxed),
-            peak_bytes: self.peak.load(Ordering::Relaxed),
-            allocations: self.allocations.load(Ordering::Relaxed),
+            capacity_bytes: a.capacity_bytes,
+            current_bytes: a.current_bytes,
+            peak_bytes: a.peak_bytes,
+            allocations: a.allocations,
             step_scratch: self.step_scratch.stats(),
         }
     }
 
     /// Restart the peak from the current usage (e.g. after warm-up).
     pub fn reset_peak(&self) {
-        self.peak
-            .store(self.current.load(Ordering::Relaxed), Ordering::Relaxed);
-    }
-
-    fn in_arena(&self, ptr: *mut u8) -> bool {
-        let p = ptr as usize;
-        self.ready.load(Ordering::Acquire)
-            && p >= self.start.load(Ordering::Relaxed)
-            && p < self.end.load(Ordering::Relaxed)
+        self.arena.reset_peak();
     }
 
     fn exhausted(&self, layout: Layout) -> ! {
@@ -272,26 +238,20 @@ impl Default for ArenaAllocator {
 // that made it.
 unsafe impl GlobalAlloc for ArenaAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if !self.ready.load(Ordering::Acquire) || self.host_side.load(Ordering::Acquire) {
+        if !self.arena.is_ready() || self.host_side.load(Ordering::Acquire) {
             // SAFETY: forwarded with the caller's layout.
             return unsafe { System.alloc(layout) };
         }
-        if self.region() == ArenaRegion::Step && self.step_scratch.is_ready() {
-            // SAFETY: forwarded with the caller's layout; the scratch is ready.
-            let ptr = unsafe { self.step_scratch.alloc(layout) };
-            if ptr.is_null() {
-                self.exhausted(layout);
-            }
-            return ptr;
-        }
-        // SAFETY: forwarded with the caller's layout.
-        let ptr = unsafe { GlobalAlloc::alloc(&self.heap, layout) };
+        let heap = if self.region() == ArenaRegion::Step && self.step_scratch.is_ready() {
+            &self.step_scratch
+        } else {
+            &self.arena
+        };
+        // SAFETY: forwarded with the caller's layout; the heap is ready.
+        let ptr = unsafe { heap.alloc(layout) };
         if ptr.is_null() {
             self.exhausted(layout);
         }
-        let now = self.current.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
-        self.peak.fetch_max(now, Ordering::Relaxed);
-        self.allocations.fetch_add(1, Ordering::Relaxed);
         ptr
     }
 
@@ -299,10 +259,9 @@ unsafe impl GlobalAlloc for ArenaAllocator {
         if self.step_scratch.contains(ptr) {
             // SAFETY: `ptr` came from the step scratch with this layout.
             unsafe { self.step_scratch.dealloc(ptr, layout) }
-        } else if self.in_arena(ptr) {
-            self.current.fetch_sub(layout.size(), Ordering::Relaxed);
-            // SAFETY: `ptr` came from the heap with this layout.
-            unsafe { GlobalAlloc::dealloc(&self.heap, ptr, layout) }
+        } else if self.arena.contains(ptr) {
+            // SAFETY: `ptr` came from the arena with this layout.
+            unsafe { self.arena.dealloc(ptr, layout) }
         } else {
             // SAFETY: `ptr` came from the system allocator with this layout.
             unsafe { System.dealloc(ptr, layout) }

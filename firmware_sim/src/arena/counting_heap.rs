@@ -1,38 +1,41 @@
-//! [`StepScratch`]: the per-step scratch heap, `[arena] step_scratch_bytes` of
-//! `memory_layout.toml`, a region apart from the arena.
+//! [`CountingHeap`]: embedded-alloc's TLSF heap (O(1), real-time) over one static region,
+//! counting live bytes, live blocks, the peak and the allocations served. The arena allocator
+//! holds two: the arena itself, and the per-step scratch (`[arena] step_scratch_bytes` of
+//! `memory_layout.toml`, a region apart from the arena).
 //!
-//! tract's op interface returns every op output as a freshly allocated tensor, so a step of the
-//! graph engine makes a few thousand allocations (2,353 for the `test` bundle). Rather than let
-//! them come and go in the arena, where the runtime's regions and the engine's weights live, the
-//! arena allocator serves every allocation made while the region label is
-//! [`Step`](super::ArenaRegion::Step) from this second TLSF heap, and the harness checks that it
-//! is empty again when the step ends: the arena then sees no allocation in a step, and the
-//! scratch's size is known at load (a rehearsal run of every stage measures it before the first
-//! step). TLSF merges a freed block with its free neighbours, so an empty heap is back in its
-//! initial state: no explicit reset is needed, only the check that nothing outlived the step.
+//! Why a step scratch: tract's op interface returns every op output as a freshly allocated
+//! tensor, so a step of the graph engine makes a few thousand allocations (2,353 for the `test`
+//! bundle). Rather than let them come and go in the arena, where the runtime's regions and the
+//! engine's weights live, the arena allocator serves every allocation made while the region
+//! label is [`Step`](super::ArenaRegion::Step) from the scratch heap, and the harness checks
+//! that it is empty again when the step ends: the arena then sees no allocation in a step, and
+//! the scratch's size is known at load (a rehearsal run of every stage measures it before the
+//! first step). TLSF merges a freed block with its free neighbours, so an empty heap is back in
+//! its initial state: no explicit reset is needed, only the check that nothing outlived the
+//! step.
 
 use core::alloc::{GlobalAlloc, Layout};
 use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use super::ArenaStorage;
 
-/// Counters of the step scratch, as read at one instant.
+/// Counters of a heap, as read at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct StepScratchStats {
-    /// Region size, bytes (0 before [`StepScratch::init`]: steps then use the arena).
+pub struct HeapStats {
+    /// Region size, bytes (0 before [`CountingHeap::init`]).
     pub capacity_bytes: usize,
-    /// Bytes requested by live blocks (0 between steps when nothing outlived a step).
+    /// Bytes requested by live blocks.
     pub current_bytes: usize,
     /// Live blocks.
     pub live_blocks: usize,
-    /// Highest `current_bytes` since `init` or the last [`StepScratch::reset_peak`].
+    /// Highest `current_bytes` since `init` or the last [`CountingHeap::reset_peak`].
     pub peak_bytes: usize,
     /// Allocations served since `init`.
     pub allocations: usize,
 }
 
 /// A counting TLSF heap over one static region.
-pub struct StepScratch {
+pub struct CountingHeap {
     heap: embedded_alloc::TlsfHeap,
     ready: AtomicBool,
     start: AtomicUsize,
@@ -43,7 +46,7 @@ pub struct StepScratch {
     allocations: AtomicUsize,
 }
 
-impl StepScratch {
+impl CountingHeap {
     /// An empty, unusable scratch until [`init`](Self::init).
     #[must_use]
     pub const fn new() -> Self {
@@ -87,9 +90,9 @@ impl StepScratch {
 
     /// Current counters.
     #[must_use]
-    pub fn stats(&self) -> StepScratchStats {
+    pub fn stats(&self) -> HeapStats {
         let ready = self.ready.load(Ordering::Acquire);
-        StepScratchStats {
+        HeapStats {
             capacity_bytes: if ready {
                 self.end.load(Ordering::Relaxed) - self.start.load(Ordering::Relaxed)
             } else {
@@ -102,7 +105,7 @@ impl StepScratch {
         }
     }
 
-    /// Restart the peak from the current use (before each step).
+    /// Restart the peak from the current use.
     pub fn reset_peak(&self) {
         self.peak
             .store(self.current.load(Ordering::Relaxed), Ordering::Relaxed);
@@ -145,7 +148,7 @@ impl StepScratch {
     }
 }
 
-impl Default for StepScratch {
+impl Default for CountingHeap {
     fn default() -> Self {
         Self::new()
     }
