@@ -10,6 +10,7 @@ mod c_api;
 mod caller_memory;
 mod common;
 mod compiled_bundle;
+mod docs_links;
 mod forged_graphs;
 mod golden_step;
 mod layout_variants;
