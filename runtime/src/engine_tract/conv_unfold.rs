@@ -537,6 +537,10 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         // Every stage as tract's plan computes it with im2col (`test`'s stem is direct spatial
         // in tract's own plan; every other convolution takes im2col anyway).

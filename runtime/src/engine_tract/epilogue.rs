@@ -278,6 +278,48 @@ mod tests {
         (model, inputs)
     }
 
+    /// The fused floor stands for tract's by-scalar `Max` (issue 40: a test per assumption on
+    /// tract 0.23.9's internals): its plan of `Max(x, s)` gives `gemm::floor(x, s)` bit for bit,
+    /// at every length (its kernel's body and tail) and on every tier, for NaN, signed zeros
+    /// and subnormals; a tract whose ReLU picked the other of two equal zeros, or let a NaN
+    /// through, fails here before any bundle digest moves.
+    #[test]
+    fn tracts_by_scalar_max_is_the_floor_bit_for_bit() {
+        let specials = [
+            f32::NAN,
+            0.0,
+            -0.0,
+            1e-40,
+            -1e-40,
+            1.5,
+            -1.5,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.5,
+        ];
+        for len in (1..=70).chain([129, 1000]) {
+            let values: Vec<f32> = (0..len)
+                .map(|i| specials[(i * 7) % specials.len()])
+                .collect();
+            for s in [0.0f32, -0.0, -0.5] {
+                let mut model = TypedModel::default();
+                let x = model.add_source("x", f32::fact([len])).unwrap();
+                let k = model
+                    .add_const("s", tensor0(s).broadcast_into_rank(1).unwrap())
+                    .unwrap();
+                let y = model.wire_node("relu", math::max(), &[x, k]).unwrap()[0];
+                model.select_output_outlets(&[y]).unwrap();
+                let input = Tensor::from_shape(&[len], &values).unwrap();
+                let got = run_optimized(model, &tvec![input.into()]);
+                let want: Vec<u32> = values
+                    .iter()
+                    .map(|&v| gemm::floor(v, s).to_bits())
+                    .collect();
+                assert_eq!(bits(&got[0]), want, "length {len}, floor {s}");
+            }
+        }
+    }
+
     /// `block` through the native passes and this one against the engine's plan before this
     /// pass (the native product, then tract's `Add` and by-scalar `Max`), on one and two
     /// threads; `what` names it in failures. Not against tract's own plan of the whole block:
@@ -379,6 +421,10 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        not(satmap_avx512_tests),
+        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+    )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::Epilogues, fuse_epilogues);
     }

@@ -16,6 +16,12 @@
 //! maximum of the rows' maxima, with the same rule, is that same first tap: the separable
 //! order gives tract's bits. This module's tests check them against tract's plan, signed zeros
 //! and NaNs included, and on every stage of the committed default bundle.
+//!
+//! Not rewritten: NCHW 2 x 2 windows without dilation. tract 0.23.9 has a path of its own for
+//! them (`try_nchw_2x2_f32`: `_mm256_max_ps` over stride-1 interiors, `f32::max` elsewhere),
+//! which keeps the later of equal taps and lets a NaN through where the rule above does not (a
+//! stride-1 pool of signed zeros and NaNs differed); they stay tract's. No committed model has
+//! one (the stems pool 3 x 3).
 
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::MaxPool;
@@ -195,6 +201,9 @@ pub fn native_max_pools(mut model: TypedModel) -> TractResult<(TypedModel, usize
         let Some(window) = Unfold::of_pool(spec, [c, h, w]) else {
             continue;
         };
+        if batch_axis && window.kernel == [2, 2] && window.dilations == [1, 1] {
+            continue;
+        }
         let op = MaxPool2d { window, batch_axis };
         let x = node.inputs[0];
         replace_with_op(&mut model, &[x], id, format!("{name}.max_pool"), op)?;
@@ -259,15 +268,20 @@ mod tests {
 
     #[test]
     fn pools_compute_tracts_bits() {
-        let cases: [Shape; 6] = [
+        let cases: [Shape; 8] = [
             // nano's stem pooling; an odd map; a stride wider than the kernel; dilation; a
-            // padding wider than the map's edge windows; no batch axis.
+            // padding wider than the map's edge windows; no batch axis (also 2 x 2 windows at
+            // strides 1 and 2: tract's row-span path, which keeps the rule). Issue 40: a test
+            // per assumption on tract's internals; here that every path of tract's we replace
+            // keeps the first of equal taps and lets no NaN win.
             (64, [96, 160], 3, 2, 1, 1, true),
             (5, [13, 17], 3, 2, 1, 1, true),
-            (3, [11, 10], 2, 3, 0, 1, true),
+            (3, [11, 10], 3, 4, 0, 1, true),
             (4, [15, 14], 3, 1, 2, 2, true),
             (2, [3, 4], 3, 1, 2, 1, true),
             (6, [9, 7], 3, 2, 1, 1, false),
+            (4, [12, 20], 2, 1, 0, 1, false),
+            (4, [12, 20], 2, 2, 0, 1, false),
         ];
         for case in cases {
             let (model, inputs) = pool_model(case);
@@ -278,6 +292,16 @@ mod tests {
             let got = run_optimized(native, &inputs);
             assert_eq!(got[0].shape(), want[0].shape(), "{case:?}");
             assert_eq!(bits(&got[0]), bits(&want[0]), "{case:?}");
+        }
+    }
+
+    #[test]
+    fn nchw_two_by_two_pools_stay_tracts() {
+        // tract 0.23.9's own 2 x 2 path picks other taps on ties and NaNs (module doc): the
+        // stride-1 case below differed bit for bit when it was rewritten.
+        for stride in [1, 2, 3] {
+            let (model, _) = pool_model((4, [12, 20], 2, stride, 0, 1, true));
+            assert_eq!(native_max_pools(model).unwrap().1, 0, "stride {stride}");
         }
     }
 
