@@ -15,6 +15,11 @@
 //! executes inside it: tract's matmuls split over output tiles and its row kernels over rows,
 //! each reduction stays serial on one thread, so the outputs are bit-identical for any N
 //! (`tests/integration/threads.rs` asserts it over a replay).
+//!
+//! Here: [`TractEngine`] (loading every stage, threads, the [`Engine`] calls). Beside it:
+//! `runner` (one stage's plan, state and confined runs), `graph_load` (the checked parse),
+//! [`kernel_family`] (the one rule naming tract's kernels on this CPU), [`rewrite`] (the
+//! load-time passes) and the native ops and kernels they put in the plans.
 
 use std::num::NonZeroUsize;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -41,6 +46,7 @@ pub mod max_pool;
 pub mod natural_consts;
 pub mod pointwise;
 pub mod rewrite;
+mod runner;
 pub mod softmax;
 #[cfg(test)]
 mod test_support;
@@ -59,207 +65,11 @@ pub use graph_load::{HalfArithmetic, parse_stage_graph};
 pub(crate) use graph_load::{check_graph_io, confined, datum, engine_error, nnef_model};
 pub use kernel_family::{KernelFamily, kernel_family};
 pub use rewrite::Rewrites;
-
-/// One loaded stage: its plan's reused state and its input tensors.
-struct StageRunner {
-    stage: Stage,
-    state: TypedSimpleState,
-    inputs: Vec<Arc<Tensor>>,
-    output_lens: Vec<usize>,
-    /// What the load-time rewrites put into this stage's plan.
-    rewrites: Rewrites,
-    /// tract's message of the last failed run (the core error carries only a code).
-    last_error: Option<String>,
-    /// The arithmetic of an f16 stage (`None`: an f32 or int8 graph).
-    half: Option<HalfArithmetic>,
-}
-
-impl StageRunner {
-    fn load(
-        bundle: &Bundle,
-        nnef: &Nnef,
-        stage: Stage,
-        half: HalfArithmetic,
-    ) -> Result<Self, BundleError> {
-        let entry = bundle.manifest().stage(stage)?;
-        let bytes = bundle.read_stage(stage)?;
-        let engine_err = engine_error(stage);
-        let (model, half) = match bundle.format() {
-            GraphFormat::Nnef => nnef_model(
-                stage,
-                nnef,
-                &bytes,
-                entry,
-                bundle.manifest().precision,
-                half,
-            )?,
-            GraphFormat::Onnx => (onnx_model(stage, &bytes, entry)?, None),
-        };
-        drop(bytes);
-        let (model, rewrites) = model
-            .into_decluttered()
-            .and_then(rewrite::optimise)
-            .map_err(engine_err)?;
-        let plan = model.into_runnable().map_err(engine_err)?;
-        check_graph_io(
-            stage,
-            plan.model(),
-            entry.inputs.as_slice(),
-            entry.outputs.as_slice(),
-        )?;
-        let state = plan.spawn().map_err(engine_err)?;
-        let inputs = entry
-            .inputs
-            .iter()
-            .map(|spec| Tensor::zero_dt(datum(spec.dtype), &spec.shape).map(Arc::new))
-            .collect::<TractResult<Vec<_>>>()
-            .map_err(engine_err)?;
-        let output_lens = entry
-            .outputs
-            .iter()
-            .map(|s| s.shape.iter().product())
-            .collect();
-        Ok(Self {
-            stage,
-            state,
-            inputs,
-            output_lens,
-            rewrites,
-            last_error: None,
-            half,
-        })
-    }
-
-    fn err(&self, kind: EngineErrorKind) -> EngineError {
-        EngineError {
-            stage: self.stage,
-            kind,
-        }
-    }
-
-    /// Copy `src` into input `ix` (as `T`). The state drops its references to the inputs at the
-    /// end of every run, so the tensor is uniquely owned here.
-    fn write_input<T: Datum + Copy>(&mut self, ix: usize, src: &[T]) -> Result<(), EngineError> {
-        let stage = self.stage;
-        let err = |kind| EngineError { stage, kind };
-        let tensor = self
-            .inputs
-            .get_mut(ix)
-            .ok_or(err(EngineErrorKind::Backend(BACKEND_NO_SUCH_INPUT)))?;
-        let tensor =
-            Arc::get_mut(tensor).ok_or(err(EngineErrorKind::Backend(BACKEND_INPUT_SHARED)))?;
-        let mut view = tensor
-            .try_as_plain_ram_mut()
-            .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
-        let dst = view
-            .as_slice_mut::<T>()
-            .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
-        if dst.len() != src.len() {
-            return Err(err(EngineErrorKind::ShapeMismatch {
-                expected: dst.len(),
-                got: src.len(),
-            }));
-        }
-        dst.copy_from_slice(src);
-        Ok(())
-    }
-
-    /// Run the stage and copy each f32 output into the matching buffer of `outs`.
-    fn run(&mut self, executor: &Executor, outs: &mut [&mut [f32]]) -> Result<(), EngineError> {
-        if outs.len() != self.output_lens.len() {
-            return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
-        }
-        for (out, &n) in outs.iter().zip(&self.output_lens) {
-            if out.len() != n {
-                return Err(self.err(EngineErrorKind::ShapeMismatch {
-                    expected: n,
-                    got: out.len(),
-                }));
-            }
-        }
-        let inputs: TVec<TValue> = self
-            .inputs
-            .iter()
-            .map(|t| TValue::from_const(Arc::clone(t)))
-            .collect();
-        let state = &mut self.state;
-        let run = || state.run_plan_with_eval(inputs, vector_state::eval_node);
-        // A graph tract panics on (an index past a table that only the step's values reveal)
-        // is an error of this stage, not of the process. The state that unwound may hold
-        // half a turn (and references to the inputs): a fresh one from the same plan replaces it.
-        let results = match catch_unwind(AssertUnwindSafe(|| on_engine_threads(executor, run))) {
-            Ok(Ok(results)) => results,
-            Ok(Err(e)) => {
-                self.last_error = Some(format!("{e:#}"));
-                return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)));
-            }
-            Err(panic) => {
-                self.last_error = Some(format!("tract panicked: {}", panic_message(&*panic)));
-                let plan = Arc::clone(self.state.plan());
-                if let Ok(fresh) = plan.spawn() {
-                    self.state = fresh;
-                }
-                return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_PANICKED)));
-            }
-        };
-        if results.len() != outs.len() {
-            return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
-        }
-        for (value, out) in results.iter().zip(outs.iter_mut()) {
-            let src = value
-                .try_as_plain_ram()
-                .and_then(|v| v.as_slice::<f32>())
-                .map_err(|_| self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_DTYPE)))?;
-            if src.len() != out.len() {
-                return Err(self.err(EngineErrorKind::ShapeMismatch {
-                    expected: out.len(),
-                    got: src.len(),
-                }));
-            }
-            out.copy_from_slice(src);
-        }
-        Ok(())
-    }
-}
-
-/// The text of a caught panic's payload (`panic!` with a literal or a format).
-fn panic_message(payload: &(dyn std::any::Any + Send)) -> &str {
-    payload
-        .downcast_ref::<&str>()
-        .copied()
-        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
-        .unwrap_or("(no message)")
-}
-
-/// Run `job` (a whole plan) on the engine's threads, `executor` installed as tract's (and the
-/// native ops') executor for it: on a pool, inside it, so the plan's serial ops run on one of
-/// its workers and its parallel ops split with the others. Run from the calling thread
-/// instead, a pool of N workers plus the caller made N + 1 threads on N cores: between
-/// parallel ops the idle workers spun beside the caller's serial ops (`test`'s satellite
-/// encoder ran slower on two threads than on one).
-fn on_engine_threads<R: Send>(executor: &Executor, job: impl FnOnce() -> R + Send) -> R {
-    let scoped = || multithread_tract_scope(executor.clone(), job);
-    match executor {
-        Executor::MultiThread(pool) => pool.install(scoped),
-        _ => scoped(),
-    }
-}
-
-/// Backend code: an input tensor was still shared when the next run wanted to write it.
-pub const BACKEND_INPUT_SHARED: u32 = 1;
-/// Backend code: tract returned an error while running the plan.
-pub const BACKEND_RUN_FAILED: u32 = 2;
-/// Backend code: the stage has fewer inputs than the runtime writes.
-pub const BACKEND_NO_SUCH_INPUT: u32 = 3;
-/// Backend code: an input tensor's element type differs from the runtime buffer's.
-pub const BACKEND_INPUT_DTYPE: u32 = 4;
-/// Backend code: the stage produced a different number of outputs than the manifest declares.
-pub const BACKEND_OUTPUT_COUNT: u32 = 5;
-/// Backend code: an output is not f32.
-pub const BACKEND_OUTPUT_DTYPE: u32 = 6;
-/// Backend code: tract panicked while running the plan (caught; the stage's state was renewed
-/// and the engine stays usable; the message is in [`TractEngine::last_error`]).
-pub const BACKEND_RUN_PANICKED: u32 = 7;
+pub use runner::{
+    BACKEND_INPUT_DTYPE, BACKEND_INPUT_SHARED, BACKEND_NO_SUCH_INPUT, BACKEND_OUTPUT_COUNT,
+    BACKEND_OUTPUT_DTYPE, BACKEND_RUN_FAILED, BACKEND_RUN_PANICKED,
+};
+use runner::{StageRunner, on_engine_threads, panic_message};
 
 /// All five stages of a bundle, loaded into tract, implementing [`Engine`].
 pub struct TractEngine {
