@@ -18,7 +18,8 @@
 use glam::DVec2;
 
 use super::cache::{PREFETCH_TILES_PER_STEP, TileCache, TileState};
-use super::crop_bound::{Footprint, crop_tile_bound, footprint, tile_window};
+use super::crop_bound::{crop_tile_bound, footprint, tile_window};
+use super::crop_window::{Resolved, TileWindow};
 use super::format::{CHANNELS, PackError, RoutePack, TileKey};
 use super::route::{RouteCursor, RouteState, distance_to_route_m};
 use crate::pose::EgoPose;
@@ -112,99 +113,6 @@ impl CropReport {
         }
         (u64::from(self.covered_px) * 1000 / u64::from(self.total_px)) as u16
     }
-}
-
-#[derive(Clone, Copy, Debug)]
-enum Slot<'a> {
-    Missing,
-    Corrupt(TileKey),
-    Ready(&'a [u8]),
-}
-
-/// Where a crop tile's pixels are, once verified: in the pack image or in a decoded slot.
-#[derive(Clone, Copy, Debug)]
-enum Resolved<'a> {
-    Missing,
-    Corrupt(TileKey),
-    InPack(&'a [u8]),
-    Decoded(usize),
-}
-
-/// The pack tiles under one crop, resolved and verified once per step so the pixel loop only
-/// indexes an array. Pixel coordinates inside are relative to the window's south-west corner.
-struct TileWindow<'a> {
-    slots: [Slot<'a>; MAX_CROP_TILES],
-    cols: i64,
-    rows: i64,
-    /// log2 of the tile side (the format requires a power of two).
-    shift: u32,
-    size_px: i64,
-}
-
-impl<'a> TileWindow<'a> {
-    #[inline]
-    fn slot(&self, x: i64, y: i64) -> Slot<'a> {
-        let (col, row) = (x >> self.shift, y >> self.shift);
-        if x < 0 || y < 0 || col >= self.cols || row >= self.rows {
-            return Slot::Missing;
-        }
-        self.slots
-            .get((row * self.cols + col) as usize)
-            .copied()
-            .unwrap_or(Slot::Missing)
-    }
-
-    #[inline]
-    fn texel(&self, x: i64, y: i64) -> Result<&'a [u8], Slot<'a>> {
-        match self.slot(x, y) {
-            Slot::Ready(px) => {
-                let mask = self.size_px - 1;
-                let off = (((y & mask) * self.size_px + (x & mask)) as usize) * CHANNELS;
-                px.get(off..off + CHANNELS).ok_or(Slot::Missing)
-            }
-            other => Err(other),
-        }
-    }
-
-    /// Bilinear sample at window pixel `(x, y)` + `(fx, fy) / 65536`, or the slot that stopped
-    /// it.
-    #[inline]
-    fn bilinear(&self, x: i64, y: i64, fx: u64, fy: u64) -> Result<[u8; 3], Slot<'a>> {
-        let mask = self.size_px - 1;
-        let (lx, ly) = (x & mask, y & mask);
-        if lx < mask && ly < mask {
-            // All four neighbours in one tile: one lookup, one slice.
-            if let Slot::Ready(px) = self.slot(x, y) {
-                let row_bytes = self.size_px as usize * CHANNELS;
-                let off = ((ly * self.size_px + lx) as usize) * CHANNELS;
-                if let Some(q) = px.get(off..off + row_bytes + 2 * CHANNELS) {
-                    let (s0, n0) = (&q[..2 * CHANNELS], &q[row_bytes..]);
-                    return Ok(core::array::from_fn(|k| {
-                        blend(s0[k], s0[k + CHANNELS], n0[k], n0[k + CHANNELS], fx, fy)
-                    }));
-                }
-            }
-        }
-        let a = self.texel(x, y)?;
-        let b = self.texel(x + 1, y)?;
-        let c = self.texel(x, y + 1)?;
-        let d = self.texel(x + 1, y + 1)?;
-        Ok(core::array::from_fn(|k| {
-            let at = |t: &[u8]| t.get(k).copied().unwrap_or(0);
-            blend(at(a), at(b), at(c), at(d), fx, fy)
-        }))
-    }
-}
-
-/// Bilinear blend of south-west `a`, south-east `b`, north-west `c`, north-east `d` with
-/// weights `fx`, `fy` in 1/65536, rounded half up.
-#[inline]
-fn blend(a: u8, b: u8, c: u8, d: u8, fx: u64, fy: u64) -> u8 {
-    const ONE: u64 = 1 << 16;
-    let south = u64::from(a) * (ONE - fx) + u64::from(b) * fx;
-    let north = u64::from(c) * (ONE - fx) + u64::from(d) * fx;
-    // At most 255 * 2^32: the shift brings it back to [0, 255].
-    ((south * (ONE - fy) + north * fy + (1 << 31)) >> 32) as u8
 }
 
 /// The pack-backed satellite source: crop, coverage, tile cache and route-ahead prefetch.
@@ -376,40 +284,18 @@ impl<'a> PackSource<'a> {
         out: &mut [u8],
         report: &mut CropReport,
     ) -> Result<(), CropFault> {
-        let (h, w) = (spec.height_px, spec.width_px);
-        if h.checked_mul(w).and_then(|n| n.checked_mul(CHANNELS)) != Some(out.len()) {
-            return Err(CropFault::OutputSize);
-        }
-        if !pose.is_finite() {
-            return Err(CropFault::PoseNotFinite);
-        }
-        let spec_ok = h > 0
-            && w > 0
-            && report.total_px != u32::MAX
-            && spec.gsd_m.is_finite()
-            && spec.gsd_m > 0.0
-            && spec.x_min_m.is_finite()
-            && spec.y_min_m.is_finite();
-        if !spec_ok {
-            return Err(CropFault::BadSpec);
-        }
+        check_request(pose, spec, out.len(), report)?;
         // Pack-pixel coordinates are affine in (c, r): p(c, r) = p00 + c * dc + r * dr.
-        let Footprint {
-            p00,
-            dc,
-            dr,
-            lo,
-            hi,
-        } = footprint(pose, spec, self.pack.header().gsd_m);
+        let at = footprint(pose, spec, self.pack.header().gsd_m);
         let size_px = i64::from(self.pack.header().tile_size_px);
         // Fixed point needs |u|, |v| < 2^30 px: beyond that (over 1000 km at 1 mm/px) is off
         // any pack this runtime reads, so the crop is all fill.
         let limit_px = f64::from(1u32 << 30);
-        if !(lo.abs().max_element() < limit_px && hi.abs().max_element() < limit_px) {
+        if !(at.lo.abs().max_element() < limit_px && at.hi.abs().max_element() < limit_px) {
             fill(out);
             return Ok(());
         }
-        let (tile_x0, tile_y0, cols, rows) = tile_window(lo, hi, size_px);
+        let (tile_x0, tile_y0, cols, rows) = tile_window(at.lo, at.hi, size_px);
         let tiles = (cols * rows) as usize;
         if tiles > MAX_CROP_TILES {
             return Err(CropFault::TooManyTiles { tiles });
@@ -421,7 +307,30 @@ impl<'a> PackSource<'a> {
                 needed: tiles,
             });
         }
-        // The window's tiles, found once.
+        let resolved = self.resolve_tiles(tile_x0, tile_y0, cols, tiles);
+        let tile_bytes = self.pack.header().tile_bytes();
+        let window = TileWindow::new(
+            resolved,
+            self.pixels,
+            tile_bytes,
+            [tile_x0, tile_y0],
+            cols,
+            rows,
+            size_px,
+        );
+        report.covered_px = window.draw(&at, spec, out, report);
+        Ok(())
+    }
+
+    /// The window's tiles (`cols` x rows from `(tile_x0, tile_y0)`, `tiles` of them) found in
+    /// the pack, verified and, for a compressed pack, decoded into the tile cache.
+    fn resolve_tiles(
+        &mut self,
+        tile_x0: i64,
+        tile_y0: i64,
+        cols: i64,
+        tiles: usize,
+    ) -> [Resolved<'a>; MAX_CROP_TILES] {
         let mut found: [Option<(TileKey, usize)>; MAX_CROP_TILES] = [None; MAX_CROP_TILES];
         for (k, f) in found.iter_mut().take(tiles).enumerate() {
             let (col, row) = (k as i64 % cols, k as i64 / cols);
@@ -435,7 +344,6 @@ impl<'a> PackSource<'a> {
         for &(_, i) in found.iter().flatten() {
             self.cache.touch(i);
         }
-        // Resolve (verify, decode), then borrow the decoded slots for sampling.
         let mut resolved = [Resolved::Missing; MAX_CROP_TILES];
         for (slot, f) in resolved.iter_mut().zip(found) {
             let Some((key, i)) = f else {
@@ -452,74 +360,7 @@ impl<'a> PackSource<'a> {
                 _ => Resolved::Corrupt(key),
             };
         }
-        let tile_bytes = self.pack.header().tile_bytes();
-        let pixels: &[u8] = self.pixels;
-        let mut window = TileWindow {
-            slots: [Slot::Missing; MAX_CROP_TILES],
-            cols,
-            rows,
-            shift: size_px.trailing_zeros(),
-            size_px,
-        };
-        for (slot, r) in window.slots.iter_mut().zip(resolved) {
-            *slot = match r {
-                Resolved::Missing => Slot::Missing,
-                Resolved::Corrupt(key) => Slot::Corrupt(key),
-                Resolved::InPack(px) => Slot::Ready(px),
-                Resolved::Decoded(at) => pixels
-                    .get(at * tile_bytes..(at + 1) * tile_bytes)
-                    .map_or(Slot::Missing, Slot::Ready),
-            };
-        }
-        // Window-relative pack pixel coordinates in 32.32 fixed point.
-        const ONE: f64 = (1u64 << 32) as f64;
-        let origin = DVec2::new((tile_x0 * size_px) as f64, (tile_y0 * size_px) as f64);
-        let (du, dv) = ((dc.x * ONE) as i64, (dc.y * ONE) as i64);
-        let mut covered = 0u32;
-        let mut corrupt_seen = [false; MAX_CROP_TILES];
-        let mut pixels = out.chunks_exact_mut(CHANNELS);
-        for r in 0..h {
-            let start = p00 + dr * r as f64 - origin;
-            let (mut u, mut v) = ((start.x * ONE) as i64, (start.y * ONE) as i64);
-            for _ in 0..w {
-                let Some(dst) = pixels.next() else {
-                    return Ok(());
-                };
-                // Arithmetic shift: floor for negative coordinates too.
-                let (x, y) = (u >> 32, v >> 32);
-                let (fx, fy) = (
-                    ((u as u64) & 0xFFFF_FFFF) >> 16,
-                    ((v as u64) & 0xFFFF_FFFF) >> 16,
-                );
-                // Wrapping: after a row's last pixel (or for an absurd 1 px crop at 2^31 pack
-                // pixels a step) the next value is never used, and an overflow must not panic.
-                u = u.wrapping_add(du);
-                v = v.wrapping_add(dv);
-                match window.bilinear(x, y, fx, fy) {
-                    Ok(rgb) => {
-                        dst.copy_from_slice(&rgb);
-                        covered += 1;
-                    }
-                    Err(slot) => {
-                        dst.copy_from_slice(&FILL_RGB);
-                        if let Slot::Corrupt(key) = slot {
-                            let k = ((i64::from(key.tile_y) - tile_y0) * cols
-                                + i64::from(key.tile_x)
-                                - tile_x0) as usize;
-                            if let Some(seen) = corrupt_seen.get_mut(k)
-                                && !*seen
-                            {
-                                *seen = true;
-                                report.corrupt_tiles += 1;
-                                report.first_corrupt.get_or_insert(key);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        report.covered_px = covered;
-        Ok(())
+        resolved
     }
 
     /// Verify up to [`PREFETCH_TILES_PER_STEP`] uncached tiles that crops further along the route
@@ -595,6 +436,34 @@ impl SatelliteSource for PackSource<'_> {
 
     fn reset(&mut self) {
         self.reset_route();
+    }
+}
+
+/// The crop request itself: the output sized for the spec, a finite pose, a usable spec.
+fn check_request(
+    pose: &EgoPose,
+    spec: &CropSpec,
+    out_len: usize,
+    report: &CropReport,
+) -> Result<(), CropFault> {
+    let (h, w) = (spec.height_px, spec.width_px);
+    if h.checked_mul(w).and_then(|n| n.checked_mul(CHANNELS)) != Some(out_len) {
+        return Err(CropFault::OutputSize);
+    }
+    if !pose.is_finite() {
+        return Err(CropFault::PoseNotFinite);
+    }
+    let spec_ok = h > 0
+        && w > 0
+        && report.total_px != u32::MAX
+        && spec.gsd_m.is_finite()
+        && spec.gsd_m > 0.0
+        && spec.x_min_m.is_finite()
+        && spec.y_min_m.is_finite();
+    if spec_ok {
+        Ok(())
+    } else {
+        Err(CropFault::BadSpec)
     }
 }
 

@@ -36,6 +36,7 @@ pub mod cache;
 pub mod codec;
 pub mod crop;
 pub mod crop_bound;
+mod crop_window;
 pub mod error;
 pub mod format;
 pub mod route;
