@@ -106,6 +106,8 @@ mod tests {
         // Where tract runs AMX (64 inputs a point at most) the stem is im2col already.
         assert_eq!(n, usize::from(has_op(&direct, DIRECT_SPATIAL_OP)));
         if n == 0 {
+            // Said, not silent: the comparison below needs tract's direct kernel here.
+            eprintln!("skipped: tract runs this 64-channel stem as im2col on this CPU already");
             return;
         }
         let rewritten = rewritten.into_optimized().unwrap();

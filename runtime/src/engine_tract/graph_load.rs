@@ -326,3 +326,48 @@ pub(crate) fn check_graph_io(
         outputs,
     )
 }
+
+#[cfg(test)]
+mod tests {
+    //! What the f16 load relies on in tract 0.23.9's precision translator (issue 40: a test per
+    //! assumption on tract's internals): a filter that translates nothing keeps the operators in
+    //! f16 (native half arithmetic), the plain translator widens them to f32.
+    use tract_nnef::tract_core::floats::FloatPrecisionTranslator;
+    use tract_nnef::tract_core::ops::math;
+    use tract_nnef::tract_core::transform::ModelTransform as _;
+
+    use super::*;
+
+    /// The element type of the first node whose op is `op`'s.
+    fn type_of(model: &TypedModel, op: &str) -> DatumType {
+        let node = model
+            .nodes()
+            .iter()
+            .find(|n| n.op.name() == op)
+            .unwrap_or_else(|| panic!("no {op} node"));
+        model
+            .outlet_fact(OutletId::new(node.id, 0))
+            .unwrap()
+            .datum_type
+    }
+
+    #[test]
+    fn the_native_filter_keeps_operators_in_f16_and_the_plain_one_widens_them() {
+        let (f16, f32) = (f16::datum_type(), f32::datum_type());
+        let mut model = TypedModel::default();
+        let x = model.add_source("x", f16::fact([4])).unwrap();
+        let y = model.wire_node("square", math::mul(), &[x, x]).unwrap()[0];
+        let z = model.wire_node("sum", math::add(), &[y, x]).unwrap()[0];
+        model.select_output_outlets(&[z]).unwrap();
+        let native = FloatPrecisionTranslator::with_filter(f16, f32, |_| false)
+            .transform_into(model.clone())
+            .unwrap();
+        assert_eq!(type_of(&native, "Mul"), f16);
+        assert_eq!(type_of(&native, "Add"), f16);
+        let widened = FloatPrecisionTranslator::new(f16, f32)
+            .transform_into(model)
+            .unwrap();
+        assert_eq!(type_of(&widened, "Mul"), f32);
+        assert_eq!(type_of(&widened, "Add"), f32);
+    }
+}
