@@ -185,14 +185,21 @@ impl ArenaAllocator {
         self.arena.reset_peak();
     }
 
-    fn exhausted(&self, layout: Layout) -> ! {
-        let mut s = self.stats();
-        let in_scratch = self.region() == ArenaRegion::Step && s.step_scratch.capacity_bytes > 0;
-        if in_scratch {
-            s.capacity_bytes = s.step_scratch.capacity_bytes;
-            s.current_bytes = s.step_scratch.current_bytes;
-            s.peak_bytes = s.step_scratch.peak_bytes;
-        }
+    /// Report the heap that could not serve `layout` (the step scratch when `in_scratch`,
+    /// else the arena) and exit.
+    fn exhausted(&self, layout: Layout, in_scratch: bool) -> ! {
+        let (s, region, key, flag) = if in_scratch {
+            let s = self.step_scratch.stats();
+            (
+                s,
+                "step_scratch",
+                "step_scratch_bytes",
+                "--step-scratch-bytes",
+            )
+        } else {
+            let s = self.arena.stats();
+            (s, self.region().name(), "bytes", "--arena-bytes")
+        };
         let mut buf = FixedBuf::<512>::new();
         let _ = core::fmt::write(
             &mut buf,
@@ -200,25 +207,13 @@ impl ArenaAllocator {
                 "ERROR(arena): region `{}` does not fit: it needs {} more bytes, its {} bytes have \
                  {} in use (peak {}). Raise [arena] {} in memory_layout.toml or pass a larger \
                  {}.\n",
-                if in_scratch {
-                    "step_scratch"
-                } else {
-                    self.region().name()
-                },
+                region,
                 layout.size(),
                 s.capacity_bytes,
                 s.current_bytes,
                 s.peak_bytes,
-                if in_scratch {
-                    "step_scratch_bytes"
-                } else {
-                    "bytes"
-                },
-                if in_scratch {
-                    "--step-scratch-bytes"
-                } else {
-                    "--arena-bytes"
-                },
+                key,
+                flag,
             ),
         );
         let _ = std::io::stderr().write_all(buf.as_bytes());
@@ -242,7 +237,8 @@ unsafe impl GlobalAlloc for ArenaAllocator {
             // SAFETY: forwarded with the caller's layout.
             return unsafe { System.alloc(layout) };
         }
-        let heap = if self.region() == ArenaRegion::Step && self.step_scratch.is_ready() {
+        let in_scratch = self.region() == ArenaRegion::Step && self.step_scratch.is_ready();
+        let heap = if in_scratch {
             &self.step_scratch
         } else {
             &self.arena
@@ -250,7 +246,7 @@ unsafe impl GlobalAlloc for ArenaAllocator {
         // SAFETY: forwarded with the caller's layout; the heap is ready.
         let ptr = unsafe { heap.alloc(layout) };
         if ptr.is_null() {
-            self.exhausted(layout);
+            self.exhausted(layout, in_scratch);
         }
         ptr
     }

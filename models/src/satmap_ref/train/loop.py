@@ -156,10 +156,10 @@ def _train(args: TrainArgs, world: World) -> dict[str, Any]:
         if ck["mode"] != args.mode or ck["config"] != cfg.name:
             raise ValueError(f"{out / CHECKPOINT} is a {ck['config']}/{ck['mode']} run, "
                              f"not {cfg.name}/{args.mode}")
-        if int(ck.get("global_batch", args.batch)) != args.batch * world.size:
+        trained_batch = int(ck.get("global_batch", args.batch))
+        if trained_batch != args.batch * world.size:
             raise ValueError(f"{out / CHECKPOINT} was trained with a global batch of "
-                             f"{ck['global_batch']} frames; resume with --batch x ranks equal "
-                             "to it")
+                             f"{trained_batch} frames; resume with --batch x ranks equal to it")
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])
         sched.load_state_dict(ck["scheduler"])
