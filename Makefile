@@ -1,9 +1,10 @@
 # The two front-door commands (see README.md):
-#   make demo   a simulated drive with the default embedded model: latency/memory report + picture
+#   make demo   a simulated drive with the default embedded model: latency/memory report, pictures
+#               and out/demo/drive.mcap (open it in Foxglove)
 #   make test   the whole test suite (Rust and Python, the host and the ECU targets under
 #               emulation); .ci/run calls it
 # Commands a person runs, never CI: make train (the trained default model), make fuzz (the
-# libFuzzer campaign), make fuzz-parsers (1.65M generated inputs).
+# libFuzzer campaign), make fuzz-parsers (1.8M generated inputs).
 # Everything they need is installed by the targets themselves.
 
 PY_VENV := models/.venv
@@ -20,7 +21,7 @@ CARGO ?= cargo
 # `cargo run -p satmap-sim` would resolve features for that one package and compile tract again.
 demo:
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
-	target/debug/satmap-sim drive --out out/demo
+	target/debug/satmap-sim drive --out out/demo --mcap out/demo/drive.mcap
 
 # The Python venv (pip, ~5 GB of wheels: network and disk, not CPU) and the cross toolchain
 # (Debian packages into a chroot, ~3 GB: network and disk) install in the background while the
@@ -52,8 +53,8 @@ nostd:
 test-rust:
 	$(CARGO) test --workspace --exclude satmap-nostd-check
 
-# Coverage-guided fuzzing (cargo fuzz, libFuzzer) of the runtime's parsers: 7 targets under fuzz/
-# (archive, signed bundle, NNEF stage and text, map frame, route pack, manifest), each
+# Coverage-guided fuzzing (cargo fuzz, libFuzzer) of the parsers of outside bytes: 8 targets under fuzz/
+# (archive, signed bundle, NNEF stage and text, map frame, route pack, manifest, MCAP recording), each
 # FUZZ_SECONDS on a corpus kept in target/fuzz-corpus/ (a campaign resumes) seeded from
 # fuzz/seeds/; one line per target: execs, edges covered, corpus, crashes. fuzz-ci is CI's
 # slice (5 s a target, after a ~2 min cargo-fuzz install and a ~1 min build).
@@ -63,8 +64,8 @@ fuzz:
 fuzz-ci:
 	bash fuzz/run.sh 5
 
-# The generated-input campaign (never run in CI; CI runs the same file at 256 cases per parser): 11 parsers x
-# FUZZ_CASES inputs (1,650,000 by default) through tests/fuzz_parsers/, one line per parser
+# The generated-input campaign (never run in CI; CI runs the same file at 256 cases per parser): 12 parsers x
+# FUZZ_CASES inputs (1,800,000 by default) through tests/fuzz_parsers/, one line per parser
 # ("inputs run: N ... panics found: 0"), then the total; ~6 min on 2 cores. The test profile, not
 # --release: opt-level 3 with debug assertions and overflow checks, which catch more.
 # FUZZ_SEED=<u64> repeats a run. See ARCHITECTURE.md "Fuzzing".
@@ -79,7 +80,7 @@ fuzz-parsers:
 	@awk 'match($$0, /^fuzz [a-z_]+: inputs run: [0-9]+/) { k++; split(substr($$0, RSTART, RLENGTH), f, ": "); n += f[3] } \
 	  match($$0, /panics found: [0-9]+/) { split(substr($$0, RSTART, RLENGTH), f, ": "); p += f[2] } \
 	  END { printf "fuzz total: %d parsers, inputs run: %d, panics found: %d\n", k, n, p; \
-	  exit (k == 11 && p == 0) ? 0 : 1 }' out/fuzz.log
+	  exit (k == 12 && p == 0) ? 0 : 1 }' out/fuzz.log
 
 venv: $(PY_VENV)/.installed
 

@@ -2,7 +2,7 @@
 # Coverage-guided fuzzing of the runtime's parsers with cargo fuzz (libFuzzer).
 #
 # Usage: fuzz/run.sh SECONDS [TARGET...]
-#   Each target (all seven by default) runs SECONDS on a scratch corpus (target/fuzz-corpus/,
+#   Each target (all eight by default) runs SECONDS on a scratch corpus (target/fuzz-corpus/,
 #   kept between runs, so a campaign resumes where the last one stopped) seeded from the
 #   committed fuzz/seeds/<target>/, and prints one line: executions, edges covered (libFuzzer's
 #   `cov`), corpus size and crashes. Any crash, timeout (> 10 s for one input) or out-of-memory
@@ -18,7 +18,8 @@ seconds=${1:?usage: fuzz/run.sh SECONDS [TARGET...]}
 shift
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  targets=(compiled_bundle signed_bundle nnef_stage nnef_text map_frame route_pack manifest)
+  targets=(compiled_bundle signed_bundle nnef_stage nnef_text map_frame route_pack manifest
+    mcap_recording)
 fi
 CARGO_FUZZ_VERSION=0.13.2
 if ! cargo fuzz --version 2>/dev/null | grep -q "$CARGO_FUZZ_VERSION"; then

@@ -126,6 +126,16 @@ fn seeds() -> Vec<(&'static str, &'static str, Vec<u8>)> {
             "test_compiled.toml",
             bundle.manifest_bytes().to_vec(),
         ),
+        (
+            "mcap_recording",
+            "two_steps.mcap",
+            crate::mcap_recording::seed_recording(None),
+        ),
+        (
+            "mcap_recording",
+            "two_steps_zstd.mcap",
+            crate::mcap_recording::seed_recording(Some(mcap::Compression::Zstd)),
+        ),
     ]
 }
 

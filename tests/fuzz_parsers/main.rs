@@ -2,7 +2,7 @@
 //! payloads (through the JPEG and zlib decoders), bundle manifest (with
 //! its `manifest.sha256`), the compiled bundle archive (and signed: archive and signature), a stage's NNEF graph (the structural check, then tract's parse), calibration TOML, `memory_layout.toml`, the scenario folder's files
 //! (`scenario.toml`, `frame.toml`, `gt.json`), MapTR results / ground-truth JSON (all three
-//! layouts) and the GeoJSON route.
+//! layouts), the GeoJSON route and MCAP recordings (`drive --recording`).
 //!
 //! Each case hands one input to the product's public entry point and, when that accepts it, to
 //! what the product does next with the value (dims validation, region checks and the GKT table;
@@ -20,7 +20,7 @@
 //!
 //! `SATMAP_FUZZ_CASES` is the number of cases per parser (default 256, the CI slice);
 //! `SATMAP_FUZZ_SEED` the RNG seed (a number, or `random`; default fixed so CI repeats itself).
-//! `make fuzz-parsers` is the 1,650,000-input campaign (`ARCHITECTURE.md`, "Fuzzing"). Every parser
+//! `make fuzz-parsers` is the 1,800,000-input campaign (`ARCHITECTURE.md`, "Fuzzing"). Every parser
 //! prints one `fuzz <parser>: inputs run: N ... panics found: 0` line to stderr when it completes.
 //!
 //! Layout: `runner` (case count and seed, the `fuzz` loop, the summary line, the failure file),
@@ -33,6 +33,7 @@ mod geojson_route;
 mod libfuzzer_seeds;
 mod manifest;
 mod maptr_json;
+mod mcap_recording;
 mod memory_layout;
 mod mutate;
 mod nnef_graph;

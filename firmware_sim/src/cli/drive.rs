@@ -1,7 +1,8 @@
 //! `satmap-sim drive`: the firmware simulation. Replays a synthetic drive (generated on the fly,
-//! its satellite imagery packed into a route pack) or a scenario folder through `SatMap` with
-//! the tract engine, at a fixed rate on a virtual clock, inside the fixed arena of
-//! `memory_layout.toml`, and reports latency per stage against the budgets, the arena peak,
+//! its satellite imagery packed into a route pack), a scenario folder or an MCAP recording
+//! (`--recording`) through `SatMap` with the tract engine, at a fixed rate on a virtual clock,
+//! inside the fixed arena of `memory_layout.toml`, optionally writing every step as MCAP
+//! (`--mcap`), and reports latency per stage against the budgets, the arena peak,
 //! allocations per step, the steps that ran degraded (per reason) and the run digest.
 //!
 //! Exit codes: 0 all budgets met and at most the stated share of steps degraded;
@@ -22,10 +23,10 @@ use crate::cli::build_pack::CodecArg;
 use crate::eval::ResultsFile;
 use crate::harness::{
     DEFAULT_MAX_DEGRADED_SHARE, EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError,
-    MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, ReplayConfig, RouteReplayConfig, ScenarioInput, replay,
-    replay_route,
+    MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, RecordingFiles, ReplayConfig, RouteReplayConfig,
+    ScenarioInput, StepObserver, replay, replay_observed, replay_route,
 };
-use crate::render::{camera_sheet, render_frame, route_frame_geojson};
+use crate::render::{McapRecorder, camera_sheet, render_frame, route_frame_geojson};
 use crate::route_pack_builder::DEFAULT_JPEG_QUALITY;
 use satmap_runtime::satellite::CropSpec;
 
@@ -36,8 +37,26 @@ pub struct Args {
     #[arg(long, default_value = "models/bundles/test.satmap")]
     pub bundle: PathBuf,
     /// Scenario folder to replay instead of a synthetic drive.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "recording")]
     pub scenario: Option<PathBuf>,
+    /// MCAP recording to replay (Foxglove protobuf or ROS 2 CDR images, poses and motion),
+    /// with `--topics`, `--calibration` and `--route-pack`; see docs/recordings.md.
+    #[arg(long, requires_all = ["topics", "calibration", "route_pack"])]
+    pub recording: Option<PathBuf>,
+    /// With `--recording`: the topic mapping (TOML: topic -> camera index, pose and motion
+    /// topics, frame ids, the anchor of the pose frame, the assembly tolerance).
+    #[arg(long, requires = "recording")]
+    pub topics: Option<PathBuf>,
+    /// With `--recording`: the rig's calibration (TOML).
+    #[arg(long, requires = "recording")]
+    pub calibration: Option<PathBuf>,
+    /// With `--recording`: the route pack of the drive's route.
+    #[arg(long, requires = "recording")]
+    pub route_pack: Option<PathBuf>,
+    /// Write every step into this MCAP file (Foxglove schemas: cameras, satellite crop,
+    /// predicted and true map, transforms, fix, motion, step status); open it in Foxglove.
+    #[arg(long, value_name = "FILE", conflicts_with = "satellite_only")]
+    pub mcap: Option<PathBuf>,
     /// Steps to run.
     #[arg(long, default_value_t = 40)]
     pub frames: usize,
@@ -181,7 +200,8 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
             HarnessError::Step { .. }
             | HarnessError::Init(_)
             | HarnessError::Rehearsal(_)
-            | HarnessError::StepScratchNotEmpty { .. },
+            | HarnessError::StepScratchNotEmpty { .. }
+            | HarnessError::Output(_),
         )
         | None => 1,
         Some(_) => EXIT_BAD_INPUT,
@@ -201,9 +221,15 @@ pub fn run(
     let (arena_bytes, step_scratch_bytes, rate_hz) = check_args(args)?;
     let cfg = ReplayConfig {
         bundle_dir: args.bundle.clone(),
-        scenario: match &args.scenario {
-            Some(dir) => ScenarioInput::Folder(dir.clone()),
-            None => ScenarioInput::Synthetic {
+        scenario: match (&args.scenario, &args.recording) {
+            (Some(dir), _) => ScenarioInput::Folder(dir.clone()),
+            (None, Some(recording)) => ScenarioInput::Recording(RecordingFiles {
+                recording: recording.clone(),
+                topics: args.topics.clone().unwrap_or_default(),
+                calibration: args.calibration.clone().unwrap_or_default(),
+                route_pack: args.route_pack.clone().unwrap_or_default(),
+            }),
+            (None, None) => ScenarioInput::Synthetic {
                 seed: args.seed,
                 speed_mps: args.speed_mps,
                 drive_hz: args.drive_hz,
@@ -222,8 +248,22 @@ pub fn run(
     if !init(arena_bytes, step_scratch_bytes) {
         return Err(BadArgument("the arena was already initialised".into()).into());
     }
-    let outcome = replay(&cfg, Some(alloc))?;
+    let mut recorder = match &args.mcap {
+        Some(path) => Some(alloc.host_side(|| McapRecorder::create(path))?),
+        None => None,
+    };
+    let outcome = replay_observed(
+        &cfg,
+        Some(alloc),
+        recorder.as_mut().map(|r| r as &mut dyn StepObserver),
+    )?;
     alloc.host_side(|| -> Result<()> {
+        if let Some(r) = recorder.take() {
+            r.finish()?;
+        }
+        if let Some(line) = &outcome.assembly {
+            eprintln!("{line}");
+        }
         let report = &outcome.report;
         if args.json {
             println!("{}", serde_json::to_string_pretty(report)?);

@@ -84,17 +84,20 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             }
         })
         .collect();
-    let eval = evaluate(m.predictions, m.truth);
-    let map_quality = Some(MapQuality {
-        mean_ap: eval.mean_ap,
-        class_ap: eval
-            .classes
-            .iter()
-            .map(|c| (c.class.name().to_owned(), c.ap))
-            .collect(),
-        note: "Chamfer AP (0.5/1.0/1.5 m) against the drive's exact ground truth; seeds \
-               3000..3024 are worlds held out of training (export-dataset's test split)"
-            .to_owned(),
+    // A recording has no ground truth: no map quality, rather than an mAP of zero.
+    let map_quality = (!m.truth.is_empty()).then(|| {
+        let eval = evaluate(m.predictions, m.truth);
+        MapQuality {
+            mean_ap: eval.mean_ap,
+            class_ap: eval
+                .classes
+                .iter()
+                .map(|c| (c.class.name().to_owned(), c.ap))
+                .collect(),
+            note: "Chamfer AP (0.5/1.0/1.5 m) against the drive's exact ground truth; seeds \
+                   3000..3024 are worlds held out of training (export-dataset's test split)"
+                .to_owned(),
+        }
     });
     let scenario = match &m.cfg.scenario {
         ScenarioInput::Synthetic {
@@ -105,6 +108,7 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             format!("a synthetic drive (seed {seed}, {speed_mps} m/s, sampled at {drive_hz} Hz)")
         }
         ScenarioInput::Folder(d) => format!("scenario {}", d.display()),
+        ScenarioInput::Recording(r) => format!("recording {}", r.recording.display()),
     };
     let a = &m.arena;
     let mut report = Report {

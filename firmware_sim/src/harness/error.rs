@@ -78,6 +78,9 @@ pub enum HarnessError {
     /// Bad settings.
     #[error("settings: {0}")]
     Settings(String),
+    /// An output of the replay (a recording of it) could not be written.
+    #[error("output: {0}")]
+    Output(String),
 }
 
 impl From<InitError> for HarnessError {

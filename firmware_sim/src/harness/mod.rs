@@ -2,7 +2,8 @@
 //! fixed rate on a virtual clock, inside the fixed arena, and reports latency against the
 //! budgets of `memory_layout.toml`, the arena peak, allocations per step and the run digest.
 //!
-//! - `source`: the host-side scenario (synthetic drive or folder) and its route pack.
+//! - `source`: the host-side scenario (synthetic drive, folder or recording) and its route pack;
+//!   `recording_source` the MCAP recording.
 //! - `replay`: the replay loop ([`replay()`]: engine and runtime in the arena, one step per
 //!   frame).
 //! - `rehearsal`: the load-time run of every stage that sizes the step scratch.
@@ -28,6 +29,7 @@
 mod assemble;
 pub mod degraded;
 pub mod error;
+mod recording_source;
 mod rehearsal;
 mod replay;
 pub mod report;
@@ -47,7 +49,10 @@ use satmap_runtime::satellite::CropSpec;
 pub use assemble::{bundle_config_name, layout_runtime_bytes};
 pub use degraded::DEFAULT_MAX_DEGRADED_SHARE;
 pub use error::{EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessError};
-pub use replay::{MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, replay};
+pub use recording_source::{MAX_RECORDING_BYTES, RecordingFiles};
+pub use replay::{
+    MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, StepObserver, StepView, replay, replay_observed,
+};
 pub use route_replay::{RouteReplayConfig, RouteReplayReport, replay_route};
 
 use crate::eval::MapVector;
@@ -72,6 +77,8 @@ pub enum ScenarioInput {
     },
     /// A scenario folder (`synth/SCENARIO.md`).
     Folder(PathBuf),
+    /// An MCAP recording, its topic mapping, calibration and route pack.
+    Recording(RecordingFiles),
 }
 
 /// Settings of a replay.
@@ -122,6 +129,9 @@ pub struct LastStep {
 pub struct Replay {
     /// The report.
     pub report: Report,
+    /// For a recording: how its frames were assembled (cameras missing per frame, unmapped
+    /// topics).
+    pub assembly: Option<String>,
     /// The last step, for pictures.
     pub last: Option<LastStep>,
     /// GeoJSON features of every step's predictions in the world frame.

@@ -1,17 +1,21 @@
 //! The replay loop: opens the bundle and the scenario (host side), loads the engine and the
-//! runtime inside the arena, steps every frame on the virtual clock, and records each step.
+//! runtime inside the arena, steps every frame on the virtual clock, records each step and shows
+//! it to an optional [`StepObserver`] (the MCAP writer of `drive --mcap`).
 
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use satmap_runtime::bundle::Bundle;
+use satmap_runtime::calibration::NUM_CAMERAS;
 use satmap_runtime::capacity::layout;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::frame::{CameraImage, Frame, FrameLimits};
-use satmap_runtime::geo::EnuFrame;
+use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::map_frame::MapFrame;
+use satmap_runtime::pose::{EgoMotion, EgoPose};
 use satmap_runtime::regions::check_regions;
 use satmap_runtime::route_pack::{PackSource, RoutePack};
+use satmap_runtime::satellite::CropSpec;
 use satmap_runtime::step::SatMap;
 use xxhash_rust::xxh3::Xxh3;
 
@@ -20,7 +24,7 @@ use super::degraded::DegradedReason;
 use super::rehearsal::{Rehearsal, rehearse};
 use super::report::StepRecord;
 use super::route_replay::tile_buffer;
-use super::source::open_scenario;
+use super::source::{SensorFrame, open_scenario};
 use super::timed_engine::{Timed, TimedEngine, micros_since};
 use super::timed_source::TimedSource;
 use super::{HarnessError, LastStep, Replay, ReplayConfig, START_TIMESTAMP_US};
@@ -71,6 +75,49 @@ fn to_vectors(map: &MapFrame) -> Vec<MapVector> {
         .collect()
 }
 
+/// What a replay shows an observer of each step, host side, after the step.
+pub struct StepView<'a> {
+    /// Step index from 0.
+    pub index: usize,
+    /// The step's record (time, digest, health, memory).
+    pub record: &'a StepRecord,
+    /// Camera images, camera-major u8 RGB HWC (an absent camera's are zeros).
+    pub images: &'a [u8],
+    /// Image width, pixels.
+    pub image_w_px: usize,
+    /// Image height, pixels.
+    pub image_h_px: usize,
+    /// Per camera, whether the step had its image.
+    pub cameras_present: [bool; NUM_CAMERAS],
+    /// The satellite crop the step fused, u8 RGB.
+    pub crop_rgb: &'a [u8],
+    /// Its geometry.
+    pub crop_spec: CropSpec,
+    /// The ego pose in the world frame (local ENU at the anchor).
+    pub world_pose: EgoPose,
+    /// The fix the runtime's pose came from.
+    pub fix: Geodetic,
+    /// The origin of the world frame (local ENU).
+    pub anchor: Geodetic,
+    /// The ego motion.
+    pub motion: EgoMotion,
+    /// The published map (ego metres).
+    pub predictions: &'a [MapVector],
+    /// The ground truth (ego metres; empty for a recording).
+    pub ground_truth: &'a [MapVector],
+    /// Wall time of each timed stage in this step, microseconds (`Timed::name` order).
+    pub stage_latency_us: Vec<(&'static str, u64)>,
+}
+
+/// Sees every step of a replay (host side: what it allocates does not count).
+pub trait StepObserver {
+    /// Called after step `view.index`.
+    ///
+    /// # Errors
+    /// The observer's failure, which ends the replay.
+    fn on_step(&mut self, view: &StepView<'_>) -> Result<(), HarnessError>;
+}
+
 /// Run a replay. `alloc` is the global allocator when the process runs in the arena (already
 /// initialised by the caller); `None` runs without arena figures.
 ///
@@ -79,6 +126,18 @@ fn to_vectors(map: &MapFrame) -> Vec<MapVector> {
 pub fn replay(
     cfg: &ReplayConfig,
     alloc: Option<&'static ArenaAllocator>,
+) -> Result<Replay, HarnessError> {
+    replay_observed(cfg, alloc, None)
+}
+
+/// [`replay`], showing every step to `observer`.
+///
+/// # Errors
+/// As [`replay`], and the observer's.
+pub fn replay_observed(
+    cfg: &ReplayConfig,
+    alloc: Option<&'static ArenaAllocator>,
+    mut observer: Option<&mut dyn StepObserver>,
 ) -> Result<Replay, HarnessError> {
     // 1 mHz .. 10 kHz keeps every virtual timestamp (start + frames * period) far from u64
     // overflow for any frame count the harness can hold.
@@ -122,6 +181,8 @@ pub fn replay(
         Ok((bundle, source, anchor, pack_bytes))
     })?;
     let frames = cfg.frames.min(source.len());
+    let assembly = source.summary();
+    let has_ground_truth = source.has_ground_truth();
     let dims = bundle.dims().clone();
     let world = EnuFrame::new(anchor);
     let pack = RoutePack::parse(&pack_bytes).map_err(|e| HarnessError::Pack(e.to_string()))?;
@@ -197,7 +258,9 @@ pub fn replay(
     let mut peak_bytes = 0;
     let mut last = None;
     for k in 0..frames {
-        let sensor = host(alloc, || source.frame(k, &mut images))?;
+        let sensor: SensorFrame = host(alloc, || {
+            source.frame(k, &mut images, dims.image_w, dims.image_h)
+        })?;
         let compass_deg = 90.0 - sensor.world_pose.yaw_rad.to_degrees();
         let p = sensor.world_pose.position_m;
         let fix = world.enu_to_geodetic(glam::DVec3::new(p.x, p.y, 0.0));
@@ -209,18 +272,28 @@ pub fn replay(
             timestamp_us,
             pose,
             motion: sensor.motion,
+            // A camera the frame lacks goes through the runtime's dropout path.
             images: core::array::from_fn(|c| {
-                Some(CameraImage {
+                let capture = sensor.cameras[c];
+                capture.present.then(|| CameraImage {
                     width_px: dims.image_w as u32,
                     height_px: dims.image_h as u32,
                     rgb: &images[c * image_bytes..(c + 1) * image_bytes],
-                    // The synthetic rig captures every camera at the frame's time.
-                    capture_us: timestamp_us,
+                    capture_us: timestamp_us.saturating_sub(capture.age_us),
                     valid: true,
                 })
             }),
         };
 
+        let stage_counts = observer.is_some().then(|| {
+            satmap
+                .engine_mut()
+                .timings()
+                .series
+                .each_ref()
+                .map(|s| s.len())
+        });
+        let crop_count = satmap.satellite_mut().crop_us.len();
         label(alloc, ArenaRegion::Step);
         let before = stats_of(alloc);
         // Restart the peak so that this step's own peak is measured, not the start-up one
@@ -272,11 +345,49 @@ pub fn replay(
             degraded_reason,
         });
 
-        host(alloc, || {
+        host(alloc, || -> Result<(), HarnessError> {
             let name = frame_dir_name(k);
+            let preds = satmap.last_map().map(to_vectors).unwrap_or_default();
+            if let (Some(obs), Some(counts)) = (observer.as_deref_mut(), stage_counts) {
+                let satellite = &satmap.satellite_mut().crop_us;
+                let crop_us: u64 = satellite.samples_us()[crop_count..].iter().sum();
+                let timings = satmap.engine_mut().timings();
+                let stage_latency_us = Timed::ALL
+                    .iter()
+                    .map(|&t| {
+                        let us = if t == Timed::SatelliteCrop {
+                            crop_us
+                        } else {
+                            timings.series[t as usize].samples_us()[counts[t as usize]..]
+                                .iter()
+                                .sum()
+                        };
+                        (t.name(), us)
+                    })
+                    .collect();
+                let record = steps.last().ok_or_else(|| {
+                    HarnessError::Settings("a step without its record".to_owned())
+                })?;
+                obs.on_step(&StepView {
+                    index: k,
+                    record,
+                    images: &images,
+                    image_w_px: dims.image_w,
+                    image_h_px: dims.image_h,
+                    cameras_present: sensor.cameras.map(|c| c.present),
+                    crop_rgb: satmap.crop(),
+                    crop_spec: dims.crop_spec(),
+                    world_pose: sensor.world_pose,
+                    fix,
+                    anchor,
+                    motion: sensor.motion,
+                    predictions: &preds,
+                    ground_truth: &sensor.ground_truth,
+                    stage_latency_us,
+                })?;
+            }
             if let Some(map) = satmap.last_map() {
                 maps.push(map.clone());
-                let preds = to_vectors(map);
                 features.extend(crate::render::frame_features(
                     &sensor.world_pose,
                     &preds,
@@ -295,9 +406,12 @@ pub fn replay(
                 }
                 predictions.insert(name.clone(), preds);
             }
-            truth.insert(name, sensor.ground_truth);
+            if has_ground_truth {
+                truth.insert(name, sensor.ground_truth);
+            }
             progress.inc(1);
-        });
+            Ok(())
+        })?;
     }
     label(alloc, ArenaRegion::Unlabelled);
     let end = stats_of(alloc);
@@ -330,6 +444,7 @@ pub fn replay(
     });
     Ok(Replay {
         report,
+        assembly,
         last,
         features,
         maps,

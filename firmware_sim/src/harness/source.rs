@@ -1,13 +1,15 @@
-//! The host-side scenario of a replay: a synthetic drive generated on the fly or a scenario
-//! folder, rendered frame by frame, and the route pack built from its imagery (flash on the
-//! vehicle).
+//! The host-side scenario of a replay: a synthetic drive generated on the fly, a scenario
+//! folder or an MCAP recording, rendered or decoded frame by frame, and the route pack built from
+//! its imagery or given (flash on the vehicle).
 
 use std::path::Path;
 
 use satmap_runtime::calibration::Calibration;
+use satmap_runtime::calibration::NUM_CAMERAS;
 use satmap_runtime::geo::Geodetic;
 use satmap_runtime::pose::{EgoMotion, EgoPose};
 
+use super::recording_source::RecordingSource;
 use super::world_imagery::RasterImagery;
 use super::{HarnessError, ReplayConfig, ScenarioInput};
 use crate::eval::MapVector;
@@ -20,12 +22,37 @@ pub(super) struct SensorFrame {
     pub(super) world_pose: EgoPose,
     pub(super) motion: EgoMotion,
     pub(super) ground_truth: Vec<MapVector>,
+    /// Per camera, whether the frame has its image and how old it is.
+    pub(super) cameras: [CameraCapture; NUM_CAMERAS],
+}
+
+/// One camera's image in a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct CameraCapture {
+    /// The frame has an image of this camera (else the runtime runs without it: dropout).
+    pub(super) present: bool,
+    /// Time from its capture to the frame's, microseconds.
+    pub(super) age_us: u64,
+}
+
+impl CameraCapture {
+    /// A camera captured at the frame's time (synthetic rigs, scenario folders).
+    pub(super) const AT_FRAME_TIME: Self = Self {
+        present: true,
+        age_us: 0,
+    };
+    /// A camera missing from the frame.
+    pub(super) const ABSENT: Self = Self {
+        present: false,
+        age_us: 0,
+    };
 }
 
 /// The host-side scenario: a frame source, the calibration and the route pack.
 pub(super) enum Source {
     Synthetic(Box<SyntheticDrive>),
     Folder(Box<Scenario>),
+    Recording(Box<RecordingSource>),
 }
 
 impl Source {
@@ -33,6 +60,7 @@ impl Source {
         match self {
             Self::Synthetic(d) => d.calibration(),
             Self::Folder(s) => &s.calibration,
+            Self::Recording(r) => r.calibration(),
         }
     }
 
@@ -40,12 +68,33 @@ impl Source {
         match self {
             Self::Synthetic(d) => d.len(),
             Self::Folder(s) => s.manifest.num_frames,
+            Self::Recording(r) => r.len(),
         }
     }
 
-    /// Render frame `k` into `images` (camera-major).
-    pub(super) fn frame(&self, k: usize, images: &mut [u8]) -> Result<SensorFrame, HarnessError> {
+    /// Whether the frames carry ground truth (a recording has none).
+    pub(super) const fn has_ground_truth(&self) -> bool {
+        !matches!(self, Self::Recording(_))
+    }
+
+    /// A line on how the frames were assembled, for a recording.
+    pub(super) fn summary(&self) -> Option<String> {
         match self {
+            Self::Recording(r) => Some(r.summary()),
+            _ => None,
+        }
+    }
+
+    /// Render frame `k` into `images` (camera-major, `image_w_px` x `image_h_px` RGB each).
+    pub(super) fn frame(
+        &self,
+        k: usize,
+        images: &mut [u8],
+        image_w_px: usize,
+        image_h_px: usize,
+    ) -> Result<SensorFrame, HarnessError> {
+        match self {
+            Self::Recording(r) => r.frame(k, images, image_w_px, image_h_px),
             Self::Synthetic(d) => {
                 let (pose, motion) = d.pose_and_motion(k);
                 if !d.render_images(k, images) {
@@ -57,6 +106,7 @@ impl Source {
                     world_pose: pose,
                     motion,
                     ground_truth: d.ground_truth_at(&pose),
+                    cameras: [CameraCapture::AT_FRAME_TIME; NUM_CAMERAS],
                 })
             }
             Self::Folder(s) => {
@@ -75,6 +125,7 @@ impl Source {
                     world_pose: f.pose,
                     motion: f.motion,
                     ground_truth: f.ground_truth,
+                    cameras: [CameraCapture::AT_FRAME_TIME; NUM_CAMERAS],
                 })
             }
         }
@@ -126,6 +177,10 @@ pub(super) fn open_scenario(
             let built =
                 build_pack(&mut imagery, &route, &corridor_options(cfg)).map_err(|e| pack(&e))?;
             Ok((Source::Synthetic(Box::new(drive)), anchor, built.bytes))
+        }
+        ScenarioInput::Recording(files) => {
+            let (source, anchor, pack_bytes) = RecordingSource::open(files)?;
+            Ok((Source::Recording(Box::new(source)), anchor, pack_bytes))
         }
         ScenarioInput::Folder(dir) => {
             let s = Scenario::open(dir).map_err(|e| scen(&e))?;

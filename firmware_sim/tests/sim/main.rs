@@ -6,6 +6,7 @@ mod bundle_signing_cli;
 mod cli_exit_codes;
 mod cli_refusals;
 mod common;
+mod drive_mcap;
 mod eval_chamfer_ap;
 mod eval_geos_buffer;
 mod eval_maptr_protocol;
