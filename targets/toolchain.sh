@@ -32,7 +32,13 @@ PACKAGES=(
 STAMP="$ROOT/.satmap-toolchain"
 WANT=$(printf '%s\n' "v1" "${PACKAGES[@]}" | sha256sum | cut -c1-16)
 
+# The downloaded .deb files stay in apt's cache after an install (~500 MB): disk CI may not have.
+drop_debs() {
+  find "$ROOT/var/cache/apt/archives" -maxdepth 1 -name '*.deb' -delete 2>/dev/null || true
+}
+
 if [[ -f "$STAMP" && "$(cat "$STAMP")" == "$WANT" ]]; then
+  drop_debs
   echo "cross toolchain: ready in $ROOT"
   exit 0
 fi
@@ -72,5 +78,6 @@ echo "cross toolchain: installing ${#PACKAGES[@]} packages"
   rustc --version; cargo --version; aarch64-linux-gnu-gcc --version | head -n1
   qemu-aarch64 --version | head -n1; qemu-system-aarch64 --version | head -n1
 "
+drop_debs
 echo "$WANT" > "$STAMP"
 echo "cross toolchain: ready in $ROOT"

@@ -17,6 +17,12 @@ use crate::topics::{NUM_CAMERAS, TopicMap};
 /// Most frames (poses) one recording may hold: the harness's own bound on a replay.
 pub const MAX_FRAMES: usize = 100_000;
 
+/// Largest record, and largest decompressed chunk, read: bytes. A record's length is read from
+/// the file, and the `mcap` crate's `MessageStream` sets no bound inside chunks (a flipped bit
+/// asked it for 7.6e18 bytes, an abort); chunks are 1 MiB in the Python writer, 768 KiB in
+/// ROS 2's, and one message a camera image.
+pub const MAX_RECORD_BYTES: usize = 256 << 20;
+
 /// Image codecs the runtime's host side decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageFormat {
@@ -144,10 +150,22 @@ impl Recording {
     pub fn read(bytes: &[u8], map: &TopicMap) -> Result<Self, RecordingError> {
         let mut d = Decoded::default();
         let mut stats = AssemblyStats::default();
-        let stream = mcap::MessageStream::new(bytes)
-            .map_err(|e| RecordingError::Container(e.to_string()))?;
-        for message in stream {
-            let message = message.map_err(|e| RecordingError::Container(e.to_string()))?;
+        let mut reader = mcap::sans_io::MessageReader::new_with_options(
+            mcap::sans_io::LinearReaderOptions::default()
+                .with_record_length_limit(MAX_RECORD_BYTES),
+        );
+        let mut rest = bytes;
+        while let Some(event) = reader.next_event() {
+            let message = match event.map_err(|e| RecordingError::Container(e.to_string()))? {
+                mcap::sans_io::MessageReadEvent::ReadRequest(need) => {
+                    let n = need.min(rest.len());
+                    reader.insert(n).copy_from_slice(&rest[..n]);
+                    reader.notify_read(n);
+                    rest = &rest[n..];
+                    continue;
+                }
+                mcap::sans_io::MessageReadEvent::Message(message) => message,
+            };
             stats.messages += 1;
             let topic = message.channel.topic.as_str();
             let index = {
