@@ -7,7 +7,7 @@
 //! - [`write`]: a replayed drive written with the Foxglove schemas.
 //! - [`ros2`]: the ROS 2 messages read, as their CDR layout.
 //! - [`json_schemas`]: our two JSON channels (ego motion, step status).
-//! - [`error`]: [`RecordingError`].
+//! - [`error`]: the errors, [`RecordingError`] and what a topic is for ([`Role`]).
 //!
 //! Host side only: the ECU runtime never reads MCAP; the harness replays what this reads.
 

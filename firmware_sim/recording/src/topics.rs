@@ -199,7 +199,8 @@ impl TopicMap {
             ("lon_deg", a.lon_deg, 180.0),
             ("height_m", a.height_m, 100_000.0),
         ] {
-            if !(value.abs() <= limit) {
+            // `contains` is false for NaN: a non-finite anchor is refused too.
+            if !(-limit..=limit).contains(&value) {
                 return Err(TopicMapError::Anchor { field, value });
             }
         }
