@@ -70,8 +70,43 @@ pub enum EngineErrorKind {
         /// Index given.
         camera: usize,
     },
-    /// The backend failed; the code is backend-specific (documented by the implementation).
-    Backend(u32),
+    /// The graph backend failed.
+    Backend(BackendFault),
+}
+
+/// How a graph backend failed a stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum BackendFault {
+    /// An input tensor was still shared when the next run wanted to write it.
+    InputShared,
+    /// The backend returned an error while running the stage (the backend keeps its message).
+    RunFailed,
+    /// The stage has fewer inputs than the runtime writes.
+    NoSuchInput,
+    /// An input tensor's element type differs from the runtime buffer's.
+    InputDtype,
+    /// The stage produced another number of outputs than the manifest declares.
+    OutputCount,
+    /// An output is not f32.
+    OutputDtype,
+    /// The backend panicked while running the stage (caught; the stage's state was renewed and
+    /// the engine stays usable; the backend keeps the message).
+    RunPanicked,
+}
+
+impl fmt::Display for BackendFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::InputShared => "an input tensor is still shared",
+            Self::RunFailed => "the backend failed to run the stage",
+            Self::NoSuchInput => "the stage has fewer inputs than the runtime writes",
+            Self::InputDtype => "an input's element type differs from the runtime buffer's",
+            Self::OutputCount => "the stage produced another number of outputs than declared",
+            Self::OutputDtype => "an output is not f32",
+            Self::RunPanicked => "the backend panicked running the stage (caught)",
+        })
+    }
 }
 
 /// A stage failed.
@@ -100,9 +135,7 @@ impl fmt::Display for EngineError {
                     self.stage
                 )
             }
-            EngineErrorKind::Backend(code) => {
-                write!(f, "stage {}: backend error code {code}", self.stage)
-            }
+            EngineErrorKind::Backend(fault) => write!(f, "stage {}: {fault}", self.stage),
         }
     }
 }

@@ -40,7 +40,7 @@ pub use glam;
 pub use heapless;
 
 pub use calibration::Calibration;
-pub use engine::{Engine, EngineError, EngineErrorKind, Stage};
+pub use engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
 pub use error::{InitError, StepError};
 pub use frame::{CameraImage, CameraMask, CameraState, Frame};
 pub use map_frame::{Health, MapClass, MapElement, MapFrame, SatellitePrior};

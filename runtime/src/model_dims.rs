@@ -10,7 +10,8 @@ use crate::capacity::{
     MAX_CAMERAS, MAX_FEATURES, MAX_KERNEL_POINTS, MAX_QUERIES, MAX_TOP_K, NUM_CLASSES, NUM_HEADS,
     NUM_POINTS,
 };
-use crate::error::DimsError;
+use crate::error::{DimsError, ImageSide};
+use crate::frame::Axis;
 use crate::satellite::CropSpec;
 
 /// Coarsest satellite ground sampling distance a model may ask for, metres per pixel (the route
@@ -204,8 +205,7 @@ impl ModelDims {
                 max: MAX_SAT_GSD_M as u32,
             });
         }
-        for axis in 0..3u8 {
-            let a = usize::from(axis);
+        for (a, axis) in Axis::ALL.into_iter().enumerate() {
             if self.pc_range_m[a] >= self.pc_range_m[a + 3] {
                 return Err(DimsError::EmptyRange { axis });
             }
@@ -273,10 +273,14 @@ impl ModelDims {
             });
         }
         if self.pad_h < self.image_h {
-            return Err(DimsError::PaddingSmallerThanImage { height: true });
+            return Err(DimsError::PaddingSmallerThanImage {
+                side: ImageSide::Height,
+            });
         }
         if self.pad_w < self.image_w {
-            return Err(DimsError::PaddingSmallerThanImage { height: false });
+            return Err(DimsError::PaddingSmallerThanImage {
+                side: ImageSide::Width,
+            });
         }
         // Sizes that pass every bound above may still overflow a derived buffer length in bytes
         // (`embed_dims = 2^62`): refuse them here so no accessor below can overflow.
@@ -390,7 +394,7 @@ mod tests {
         assert_eq!(d.validate(), Err(DimsError::Zero { field: "feat_w" }));
         let mut d = ModelDims::test_config();
         d.pc_range_m[4] = -40.0;
-        assert_eq!(d.validate(), Err(DimsError::EmptyRange { axis: 1 }));
+        assert_eq!(d.validate(), Err(DimsError::EmptyRange { axis: Axis::Y }));
         let mut d = ModelDims::test_config();
         d.num_pts = 10;
         assert!(matches!(

@@ -11,7 +11,7 @@ use glam::{DVec2, Vec3};
 
 use crate::calibration::{Calibration, NUM_CAMERAS};
 use crate::capacity::CAN_BUS_LEN;
-use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
+use crate::engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
 use crate::frame::{CameraImage, Frame};
 use crate::model_dims::ModelDims;
 use crate::pose::{EgoMotion, EgoPose};
@@ -56,7 +56,7 @@ impl FakeEngine {
             self.fail_next = None;
             return Err(EngineError {
                 stage,
-                kind: EngineErrorKind::Backend(7),
+                kind: EngineErrorKind::Backend(BackendFault::RunFailed),
             });
         }
         Ok(())

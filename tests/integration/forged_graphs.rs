@@ -15,8 +15,8 @@ use std::io::Read as _;
 use satmap_runtime::bundle::archive::write_archive;
 use satmap_runtime::bundle::graph_check::{GraphCheckError, TensorRule, TextRule};
 use satmap_runtime::bundle::{Bundle, BundleError, Sha256Digest, Trust};
-use satmap_runtime::engine::{Engine, EngineErrorKind, Stage};
-use satmap_runtime::engine_tract::{BACKEND_RUN_FAILED, BACKEND_RUN_PANICKED, TractEngine};
+use satmap_runtime::engine::{BackendFault, Engine, EngineErrorKind, Stage};
+use satmap_runtime::engine_tract::TractEngine;
 
 use crate::common::root;
 
@@ -286,7 +286,10 @@ fn a_table_cut_short_fails_the_step_that_reads_past_it_and_the_engine_goes_on() 
     let e = engine.encode_image(4, &image, &mut value).unwrap_err();
     assert_eq!(e.stage, Stage::ImageEncoder);
     assert!(
-        matches!(e.kind, EngineErrorKind::Backend(code) if code == BACKEND_RUN_PANICKED || code == BACKEND_RUN_FAILED),
+        matches!(
+            e.kind,
+            EngineErrorKind::Backend(BackendFault::RunPanicked | BackendFault::RunFailed)
+        ),
         "{e}"
     );
     println!(

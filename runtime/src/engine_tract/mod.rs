@@ -57,7 +57,7 @@ use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
 
 use crate::bundle::{Bundle, BundleError, GraphFormat};
-use crate::engine::{Engine, EngineError, EngineErrorKind, Stage};
+use crate::engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
 use crate::model_dims::ModelDims;
 
 pub(crate) use graph_load::onnx_model;
@@ -65,10 +65,6 @@ pub use graph_load::{HalfArithmetic, parse_stage_graph};
 pub(crate) use graph_load::{check_graph_io, confined, datum, engine_error, nnef_model};
 pub use kernel_family::{KernelFamily, kernel_family};
 pub use rewrite::Rewrites;
-pub use runner::{
-    BACKEND_INPUT_DTYPE, BACKEND_INPUT_SHARED, BACKEND_NO_SUCH_INPUT, BACKEND_OUTPUT_COUNT,
-    BACKEND_OUTPUT_DTYPE, BACKEND_RUN_FAILED, BACKEND_RUN_PANICKED,
-};
 use runner::{StageRunner, on_engine_threads, panic_message};
 
 /// All five stages of a bundle, loaded into tract, implementing [`Engine`].
@@ -202,7 +198,7 @@ impl TractEngine {
         });
         if let Err(e) = run {
             r.last_error = Some(format!("{e:#}"));
-            return Err(r.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)));
+            return Err(r.err(EngineErrorKind::Backend(BackendFault::RunFailed)));
         }
         totals.sort_by(|a, b| b.1.total_cmp(&a.1));
         Ok(totals)

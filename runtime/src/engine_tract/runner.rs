@@ -93,15 +93,15 @@ impl StageRunner {
         let tensor = self
             .inputs
             .get_mut(ix)
-            .ok_or(err(EngineErrorKind::Backend(BACKEND_NO_SUCH_INPUT)))?;
+            .ok_or(err(EngineErrorKind::Backend(BackendFault::NoSuchInput)))?;
         let tensor =
-            Arc::get_mut(tensor).ok_or(err(EngineErrorKind::Backend(BACKEND_INPUT_SHARED)))?;
+            Arc::get_mut(tensor).ok_or(err(EngineErrorKind::Backend(BackendFault::InputShared)))?;
         let mut view = tensor
             .try_as_plain_ram_mut()
-            .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
+            .map_err(|_| err(EngineErrorKind::Backend(BackendFault::InputDtype)))?;
         let dst = view
             .as_slice_mut::<T>()
-            .map_err(|_| err(EngineErrorKind::Backend(BACKEND_INPUT_DTYPE)))?;
+            .map_err(|_| err(EngineErrorKind::Backend(BackendFault::InputDtype)))?;
         if dst.len() != src.len() {
             return Err(err(EngineErrorKind::ShapeMismatch {
                 expected: dst.len(),
@@ -119,7 +119,7 @@ impl StageRunner {
         outs: &mut [&mut [f32]],
     ) -> Result<(), EngineError> {
         if outs.len() != self.output_lens.len() {
-            return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
+            return Err(self.err(EngineErrorKind::Backend(BackendFault::OutputCount)));
         }
         for (out, &n) in outs.iter().zip(&self.output_lens) {
             if out.len() != n {
@@ -143,7 +143,7 @@ impl StageRunner {
             Ok(Ok(results)) => results,
             Ok(Err(e)) => {
                 self.last_error = Some(format!("{e:#}"));
-                return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_FAILED)));
+                return Err(self.err(EngineErrorKind::Backend(BackendFault::RunFailed)));
             }
             Err(panic) => {
                 self.last_error = Some(format!("tract panicked: {}", panic_message(&*panic)));
@@ -151,17 +151,17 @@ impl StageRunner {
                 if let Ok(fresh) = plan.spawn() {
                     self.state = fresh;
                 }
-                return Err(self.err(EngineErrorKind::Backend(BACKEND_RUN_PANICKED)));
+                return Err(self.err(EngineErrorKind::Backend(BackendFault::RunPanicked)));
             }
         };
         if results.len() != outs.len() {
-            return Err(self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_COUNT)));
+            return Err(self.err(EngineErrorKind::Backend(BackendFault::OutputCount)));
         }
         for (value, out) in results.iter().zip(outs.iter_mut()) {
             let src = value
                 .try_as_plain_ram()
                 .and_then(|v| v.as_slice::<f32>())
-                .map_err(|_| self.err(EngineErrorKind::Backend(BACKEND_OUTPUT_DTYPE)))?;
+                .map_err(|_| self.err(EngineErrorKind::Backend(BackendFault::OutputDtype)))?;
             if src.len() != out.len() {
                 return Err(self.err(EngineErrorKind::ShapeMismatch {
                     expected: out.len(),
@@ -196,19 +196,3 @@ pub(super) fn on_engine_threads<R: Send>(executor: &Executor, job: impl FnOnce()
         _ => scoped(),
     }
 }
-
-/// Backend code: an input tensor was still shared when the next run wanted to write it.
-pub const BACKEND_INPUT_SHARED: u32 = 1;
-/// Backend code: tract returned an error while running the plan.
-pub const BACKEND_RUN_FAILED: u32 = 2;
-/// Backend code: the stage has fewer inputs than the runtime writes.
-pub const BACKEND_NO_SUCH_INPUT: u32 = 3;
-/// Backend code: an input tensor's element type differs from the runtime buffer's.
-pub const BACKEND_INPUT_DTYPE: u32 = 4;
-/// Backend code: the stage produced a different number of outputs than the manifest declares.
-pub const BACKEND_OUTPUT_COUNT: u32 = 5;
-/// Backend code: an output is not f32.
-pub const BACKEND_OUTPUT_DTYPE: u32 = 6;
-/// Backend code: tract panicked while running the plan (caught; the stage's state was renewed
-/// and the engine stays usable; the message is in [`TractEngine::last_error`]).
-pub const BACKEND_RUN_PANICKED: u32 = 7;

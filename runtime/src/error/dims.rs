@@ -3,6 +3,17 @@
 
 use core::fmt;
 
+use crate::frame::Axis;
+
+/// A side of an image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageSide {
+    /// Rows.
+    Height,
+    /// Columns.
+    Width,
+}
+
 /// Why a [`ModelDims`] cannot run on this runtime.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
@@ -59,15 +70,15 @@ pub enum DimsError {
         /// Largest allowed value.
         max: usize,
     },
-    /// The padded image is smaller than the image.
+    /// The padded image is smaller than the image on one side.
     PaddingSmallerThanImage {
-        /// True for the height, false for the width.
-        height: bool,
+        /// The side.
+        side: ImageSide,
     },
-    /// `pc_range_m` has `min >= max` on an axis (0 = x, 1 = y, 2 = z).
+    /// `pc_range_m` has `min >= max` on an axis of the ego frame.
     EmptyRange {
-        /// Axis index.
-        axis: u8,
+        /// The axis.
+        axis: Axis,
     },
     /// A positive quantity (scale, ground sampling distance) is not positive.
     NotPositive {
@@ -132,12 +143,12 @@ impl fmt::Display for DimsError {
                 )
             }
             Self::TopKTooLarge { top_k, max } => write!(f, "top_k {top_k} exceeds {max}"),
-            Self::PaddingSmallerThanImage { height: true } => {
-                write!(f, "pad_h is smaller than image_h")
-            }
-            Self::PaddingSmallerThanImage { height: false } => {
-                write!(f, "pad_w is smaller than image_w")
-            }
+            Self::PaddingSmallerThanImage {
+                side: ImageSide::Height,
+            } => write!(f, "pad_h is smaller than image_h"),
+            Self::PaddingSmallerThanImage {
+                side: ImageSide::Width,
+            } => write!(f, "pad_w is smaller than image_w"),
             Self::EmptyRange { axis } => {
                 write!(f, "pc_range_m axis {axis} has min >= max")
             }

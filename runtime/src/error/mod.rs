@@ -10,7 +10,7 @@ use crate::gkt::KernelError;
 use crate::step::{FramePart, StepSlice};
 
 mod dims;
-pub use dims::DimsError;
+pub use dims::{DimsError, ImageSide};
 
 /// Why the runtime could not be created or recalibrated.
 ///

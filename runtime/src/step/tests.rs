@@ -5,7 +5,7 @@
 use alloc::vec::Vec;
 
 use super::*;
-use crate::engine::{EngineError, EngineErrorKind, Stage};
+use crate::engine::{BackendFault, EngineError, EngineErrorKind, Stage};
 use crate::frame::CameraImage;
 use crate::pose::EgoPose;
 use crate::satellite::{CropSpec, FixedCrop, NoSatellite};
@@ -229,7 +229,7 @@ fn engine_failure_and_nan_output_leave_state_untouched() {
             err,
             StepError::Engine(EngineError {
                 stage,
-                kind: EngineErrorKind::Backend(7)
+                kind: EngineErrorKind::Backend(BackendFault::RunFailed)
             })
         );
         assert_eq!(rt.last_map(), Some(&first));
