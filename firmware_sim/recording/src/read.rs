@@ -150,6 +150,7 @@ impl Recording {
     pub fn read(bytes: &[u8], map: &TopicMap) -> Result<Self, RecordingError> {
         let mut d = Decoded::default();
         let mut stats = AssemblyStats::default();
+        check_uncompressed_chunks(bytes)?;
         let mut reader = mcap::sans_io::MessageReader::new_with_options(
             mcap::sans_io::LinearReaderOptions::default()
                 .with_record_length_limit(MAX_RECORD_BYTES),
@@ -195,6 +196,56 @@ impl Recording {
         let k = (*self.frames.get(frame)?.cameras.get(camera)?)?;
         self.shots.get(camera)?.get(k)
     }
+}
+
+fn container(e: impl core::fmt::Display) -> RecordingError {
+    RecordingError::Container(e.to_string())
+}
+
+/// Every record inside an uncompressed chunk must end within the chunk. The `mcap` crate (0.26)
+/// subtracts a record's length from what is left of its chunk without a check (an overflow
+/// panic where overflow checks are on, found by `fuzz/fuzz_targets/mcap_recording.rs`; reading
+/// on past the chunk where they are off), so a file whose chunk claims records longer than
+/// itself is refused here, before that reader sees it. Compressed chunks take the checked path.
+fn check_uncompressed_chunks(bytes: &[u8]) -> Result<(), RecordingError> {
+    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_emit_chunks(true)
+            .with_record_length_limit(MAX_RECORD_BYTES),
+    );
+    let mut rest = bytes;
+    while let Some(event) = reader.next_event() {
+        match event.map_err(container)? {
+            LinearReadEvent::ReadRequest(need) => {
+                let n = need.min(rest.len());
+                reader.insert(n).copy_from_slice(&rest[..n]);
+                reader.notify_read(n);
+                rest = &rest[n..];
+            }
+            LinearReadEvent::Record { data, opcode } if opcode == mcap::records::op::CHUNK => {
+                if let mcap::records::Record::Chunk { header, data } =
+                    mcap::parse_record(opcode, data).map_err(container)?
+                    && header.compression.is_empty()
+                {
+                    let mut records: &[u8] = &data;
+                    // Each record: opcode (1 byte), length (u64 LE), body.
+                    while !records.is_empty() {
+                        let framed = records
+                            .split_at_checked(9)
+                            .and_then(|(head, body)| {
+                                let len = u64::from_le_bytes(head[1..9].try_into().ok()?);
+                                body.get(usize::try_from(len).ok()?..)
+                            })
+                            .ok_or_else(|| container("a record runs past its chunk's end"))?;
+                        records = framed;
+                    }
+                }
+            }
+            LinearReadEvent::Record { .. } => {}
+        }
+    }
+    Ok(())
 }
 
 /// The roles `topic` plays in `map` (one topic may carry both pose and motion: odometry).

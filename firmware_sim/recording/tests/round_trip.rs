@@ -331,3 +331,16 @@ fn topic_maps_refuse_what_cannot_be_replayed() {
         Err(TopicMapError::Syntax(_))
     ));
 }
+
+/// The first finding of `fuzz/fuzz_targets/mcap_recording.rs`: an uncompressed chunk whose record
+/// claims more bytes than the chunk holds made the `mcap` crate subtract past zero (a panic
+/// with overflow checks). It is refused before that reader runs.
+#[test]
+fn a_record_longer_than_its_chunk_is_refused() {
+    let bytes = include_bytes!("data/record_past_its_chunk.mcap");
+    let e = Recording::read(bytes, &ours_map()).unwrap_err();
+    assert!(
+        matches!(&e, RecordingError::Container(m) if m.contains("past its chunk")),
+        "{e}"
+    );
+}
