@@ -1,7 +1,9 @@
-"""Shared fixtures: deterministic torch, the `test` config, its LUT, and a freshly exported
-`test` bundle in a temporary directory (exported once per session)."""
+"""Shared fixtures: deterministic torch, the `test` config, its LUT, a freshly exported
+`test` bundle in a temporary directory (exported once per session), and the `satmap-sim` binary
+(`$SATMAP_SIM` or the one `make test` builds)."""
 
 import os
+from pathlib import Path
 
 import pytest
 import torch
@@ -19,6 +21,17 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="session")
+def sim():
+    path = Path(os.environ.get("SATMAP_SIM") or ROOT / "target" / "debug" / "satmap-sim")
+    assert path.is_file(), (f"{path} is missing: build it (`cargo test --workspace --no-run`) "
+                            "or set SATMAP_SIM")
+    return path
 
 
 @pytest.fixture(scope="session")

@@ -8,7 +8,6 @@ it the test fails, naming it. Bounded in time: 2 frames a drive (about 40 s here
 fleet cancels what has not finished after 600 s (then the drives count as failed)."""
 
 import json
-import os
 import subprocess
 from pathlib import Path
 
@@ -20,14 +19,6 @@ from satmap_ref.fleet.drives import drive_command, parse_drives
 ROOT = Path(__file__).resolve().parents[2]
 BUNDLE = ROOT / "models" / "bundles" / "test.satmap"
 FRAMES = 2
-
-
-@pytest.fixture(scope="module")
-def sim():
-    path = Path(os.environ.get("SATMAP_SIM") or ROOT / "target" / "debug" / "satmap-sim")
-    assert path.is_file(), (f"{path} is missing: build it (`cargo test --workspace --no-run`) "
-                            "or set SATMAP_SIM")
-    return path
 
 
 def test_drive_specs_parse_and_refuse_nonsense():

@@ -7,11 +7,10 @@
 - the file `drive --mcap` writes decodes message by message with the public readers (counts
   per topic; the step status' digests are the report's), and replays to the same digest.
 
-The binary is `$SATMAP_SIM` or the one `make test` builds (`target/debug/satmap-sim`). Three
+The binary is conftest.py's `sim` (`$SATMAP_SIM` or `target/debug/satmap-sim`). Three
 frames of the committed `test` bundle a replay: about a minute in all here."""
 
 import json
-import os
 import subprocess
 from pathlib import Path
 
@@ -25,14 +24,6 @@ from satmap_ref.recordings.scenario import read_scenario
 ROOT = Path(__file__).resolve().parents[2]
 BUNDLE = ROOT / "models" / "bundles" / "test.satmap"
 FRAMES = 3
-
-
-@pytest.fixture(scope="module")
-def sim():
-    path = Path(os.environ.get("SATMAP_SIM") or ROOT / "target" / "debug" / "satmap-sim")
-    assert path.is_file(), (f"{path} is missing: build it (`cargo test --workspace --no-run`) "
-                            "or set SATMAP_SIM")
-    return path
 
 
 def run(sim, *args) -> subprocess.CompletedProcess:
