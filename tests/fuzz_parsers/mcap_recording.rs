@@ -32,6 +32,7 @@ pub fn seed_recording(compression: Option<mcap::Compression>) -> Vec<u8> {
         w.write_step(&StepMessages {
             stamp_ns,
             camera_png: core::array::from_fn(|c| (k == 0 || c != 3).then_some(png[c].as_slice())),
+            camera_age_ns: [0, 0, 0, 0, 0, 20_000_000],
             satellite_png: Some(&png[0]),
             predicted: std::slice::from_ref(&element),
             truth: std::slice::from_ref(&element),

@@ -1,7 +1,8 @@
 //! Reading a recording: every message of the mapped topics decoded (Foxglove protobuf, ROS 2
-//! CDR, our JSON), then frames assembled by time: one frame per pose, with each camera's
-//! image and the motion nearest to it within the mapping's tolerance. A camera without an image
-//! in the window is absent from its frame (the runtime's dropout path), and counted.
+//! CDR, our JSON), then frames assembled by time: each image joins the pose nearest to it within
+//! the mapping's tolerance, and every pose with at least one image is a frame, with the motion
+//! nearest to it. A camera without an image in its frame is absent (the runtime's dropout path),
+//! and counted; a pose without any image is no frame, and counted.
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -105,6 +106,8 @@ pub struct AssemblyStats {
     pub unmapped: usize,
     /// Pose messages skipped for their frame ids.
     pub other_frames: usize,
+    /// Poses no camera image is nearest to: not frames (a step needs a camera).
+    pub poses_without_images: usize,
     /// Per camera, frames it is missing from.
     pub missing: [usize; NUM_CAMERAS],
     /// Per camera, images that joined no frame.
@@ -151,24 +154,13 @@ impl Recording {
         let mut d = Decoded::default();
         let mut stats = AssemblyStats::default();
         check_uncompressed_chunks(bytes)?;
-        let mut reader = mcap::sans_io::MessageReader::new_with_options(
-            mcap::sans_io::LinearReaderOptions::default()
-                .with_record_length_limit(MAX_RECORD_BYTES),
-        );
-        let mut rest = bytes;
-        while let Some(event) = reader.next_event() {
-            let message = match event.map_err(|e| RecordingError::Container(e.to_string()))? {
-                mcap::sans_io::MessageReadEvent::ReadRequest(need) => {
-                    let n = need.min(rest.len());
-                    reader.insert(n).copy_from_slice(&rest[..n]);
-                    reader.notify_read(n);
-                    rest = &rest[n..];
-                    continue;
-                }
-                mcap::sans_io::MessageReadEvent::Message(message) => message,
+        let mut channels = Channels::default();
+        for_each_record(bytes, false, |opcode, body| {
+            let Some(message) = channels.take(opcode, body)? else {
+                return Ok(());
             };
             stats.messages += 1;
-            let topic = message.channel.topic.as_str();
+            let topic = message.topic;
             let index = {
                 let n = d.seen.entry(topic.to_owned()).or_insert(0);
                 *n += 1;
@@ -177,7 +169,7 @@ impl Recording {
             let roles = roles_of(map, topic);
             if roles.is_empty() {
                 stats.unmapped += 1;
-                continue;
+                return Ok(());
             }
             for role in roles {
                 d.decode(map, role, &message, index, &mut stats)?;
@@ -185,7 +177,8 @@ impl Recording {
                     return Err(RecordingError::TooManyFrames { max: MAX_FRAMES });
                 }
             }
-        }
+            Ok(())
+        })?;
         d.check_present(map)?;
         assemble(d, map, stats)
     }
@@ -202,16 +195,20 @@ fn container(e: impl core::fmt::Display) -> RecordingError {
     RecordingError::Container(e.to_string())
 }
 
-/// Every record inside an uncompressed chunk must end within the chunk. The `mcap` crate (0.26)
-/// subtracts a record's length from what is left of its chunk without a check (an overflow
-/// panic where overflow checks are on, found by `fuzz/fuzz_targets/mcap_recording.rs`; reading
-/// on past the chunk where they are off), so a file whose chunk claims records longer than
-/// itself is refused here, before that reader sees it. Compressed chunks take the checked path.
-fn check_uncompressed_chunks(bytes: &[u8]) -> Result<(), RecordingError> {
+/// Every record of the file in order, through mcap's sans-io linear reader with a record length
+/// limit: with `chunks`, chunk records whole; without, the records inside them (decompressed).
+/// Only schema, channel, message and chunk records are ever parsed: the `mcap` crate (0.26)
+/// panics parsing an attachment record shorter than its header (a slice whose start passes its
+/// end), and its `MessageReader` parses every record, so this reader never asks it to.
+fn for_each_record(
+    bytes: &[u8],
+    chunks: bool,
+    mut f: impl FnMut(u8, &[u8]) -> Result<(), RecordingError>,
+) -> Result<(), RecordingError> {
     use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
-            .with_emit_chunks(true)
+            .with_emit_chunks(chunks)
             .with_record_length_limit(MAX_RECORD_BYTES),
     );
     let mut rest = bytes;
@@ -223,29 +220,153 @@ fn check_uncompressed_chunks(bytes: &[u8]) -> Result<(), RecordingError> {
                 reader.notify_read(n);
                 rest = &rest[n..];
             }
-            LinearReadEvent::Record { data, opcode } if opcode == mcap::records::op::CHUNK => {
-                if let mcap::records::Record::Chunk { header, data } =
-                    mcap::parse_record(opcode, data).map_err(container)?
-                    && header.compression.is_empty()
-                {
-                    let mut records: &[u8] = &data;
-                    // Each record: opcode (1 byte), length (u64 LE), body.
-                    while !records.is_empty() {
-                        let framed = records
-                            .split_at_checked(9)
-                            .and_then(|(head, body)| {
-                                let len = u64::from_le_bytes(head[1..9].try_into().ok()?);
-                                body.get(usize::try_from(len).ok()?..)
-                            })
-                            .ok_or_else(|| container("a record runs past its chunk's end"))?;
-                        records = framed;
-                    }
-                }
-            }
-            LinearReadEvent::Record { .. } => {}
+            LinearReadEvent::Record { data, opcode } => f(opcode, data)?,
         }
     }
     Ok(())
+}
+
+/// Every record inside an uncompressed chunk must end within the chunk. The `mcap` crate (0.26)
+/// subtracts a record's length from what is left of its chunk without a check (an overflow
+/// panic where overflow checks are on, found by `fuzz/fuzz_targets/mcap_recording.rs`; reading
+/// on past the chunk where they are off), so a file whose chunk claims records longer than
+/// itself is refused here, before the reading pass. Compressed chunks take a checked path.
+fn check_uncompressed_chunks(bytes: &[u8]) -> Result<(), RecordingError> {
+    for_each_record(bytes, true, |opcode, body| {
+        if opcode != mcap::records::op::CHUNK {
+            return Ok(());
+        }
+        if let mcap::records::Record::Chunk { header, data } =
+            mcap::parse_record(opcode, body).map_err(container)?
+            && header.compression.is_empty()
+        {
+            let mut records: &[u8] = &data;
+            // Each record: opcode (1 byte), length (u64 LE), body.
+            while !records.is_empty() {
+                records = records
+                    .split_at_checked(9)
+                    .and_then(|(head, body)| {
+                        let len = u64::from_le_bytes(head[1..9].try_into().ok()?);
+                        body.get(usize::try_from(len).ok()?..)
+                    })
+                    .ok_or_else(|| container("a record runs past its chunk's end"))?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// A schema as a channel names it.
+struct SchemaInfo {
+    name: String,
+    encoding: String,
+}
+
+/// A channel's topic, schema and message encoding.
+struct ChannelInfo {
+    topic: String,
+    schema: u16,
+    message_encoding: String,
+}
+
+/// The schemas and channels seen so far (the summary repeats them; a repeat must agree).
+#[derive(Default)]
+struct Channels {
+    schemas: BTreeMap<u16, SchemaInfo>,
+    channels: BTreeMap<u16, ChannelInfo>,
+}
+
+/// One message with what its channel says of it.
+pub(crate) struct Incoming<'a> {
+    topic: &'a str,
+    schema: &'a str,
+    encoding: &'a str,
+    log_time: u64,
+    data: &'a [u8],
+}
+
+impl Channels {
+    /// Learn a schema or channel record, or link a message record to its channel.
+    fn take<'a>(
+        &'a mut self,
+        opcode: u8,
+        body: &'a [u8],
+    ) -> Result<Option<Incoming<'a>>, RecordingError> {
+        use mcap::records::{Record, op};
+        if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+            return Ok(None);
+        }
+        match mcap::parse_record(opcode, body).map_err(container)? {
+            Record::Schema { header, .. } => {
+                if header.id == 0 {
+                    return Err(container("schema id 0"));
+                }
+                let info = SchemaInfo {
+                    name: header.name,
+                    encoding: header.encoding,
+                };
+                match self.schemas.get(&header.id) {
+                    Some(s) if s.name != info.name || s.encoding != info.encoding => {
+                        return Err(container(format!("schema {} redefined", header.id)));
+                    }
+                    Some(_) => {}
+                    None => {
+                        self.schemas.insert(header.id, info);
+                    }
+                }
+                Ok(None)
+            }
+            Record::Channel(c) => {
+                if c.schema_id != 0 && !self.schemas.contains_key(&c.schema_id) {
+                    return Err(container(format!(
+                        "channel {} names schema {}, not defined before it",
+                        c.id, c.schema_id
+                    )));
+                }
+                let info = ChannelInfo {
+                    topic: c.topic,
+                    schema: c.schema_id,
+                    message_encoding: c.message_encoding,
+                };
+                match self.channels.get(&c.id) {
+                    Some(old)
+                        if old.topic != info.topic
+                            || old.schema != info.schema
+                            || old.message_encoding != info.message_encoding =>
+                    {
+                        return Err(container(format!("channel {} redefined", c.id)));
+                    }
+                    Some(_) => {}
+                    None => {
+                        self.channels.insert(c.id, info);
+                    }
+                }
+                Ok(None)
+            }
+            Record::Message { header, data } => {
+                let channel = self.channels.get(&header.channel_id).ok_or_else(|| {
+                    container(format!(
+                        "a message on unknown channel {}",
+                        header.channel_id
+                    ))
+                })?;
+                let std::borrow::Cow::Borrowed(data) = data else {
+                    return Err(container("a message body not in the file"));
+                };
+                Ok(Some(Incoming {
+                    topic: &channel.topic,
+                    schema: self
+                        .schemas
+                        .get(&channel.schema)
+                        .map_or("", |s| s.name.as_str()),
+                    encoding: &channel.message_encoding,
+                    log_time: header.log_time,
+                    data,
+                }))
+            }
+            _ => Ok(None),
+        }
+    }
 }
 
 /// The roles `topic` plays in `map` (one topic may carry both pose and motion: odometry).
@@ -266,27 +387,29 @@ fn roles_of(map: &TopicMap, topic: &str) -> Vec<Role> {
     roles
 }
 
-/// A message's schema name and encoding.
-fn schema_of<'a>(message: &'a mcap::Message<'_>) -> (&'a str, &'a str) {
-    (
-        message
-            .channel
-            .schema
-            .as_ref()
-            .map_or("", |s| s.name.as_str()),
-        message.channel.message_encoding.as_str(),
-    )
-}
-
 /// ROS's body frame (REP 103: x forward, y left) to the ego frame (x right, y forward): a
 /// rotation by -90 degrees about z, exact in floating point.
 fn ros_body_to_ego(v: ros2::Vector3) -> [f32; 3] {
     [-v.y as f32, v.x as f32, v.z as f32]
 }
 
-/// Heading of a rotation about z (any tilt is ignored), counter-clockwise from the parent's x.
-fn yaw_of(x: f64, y: f64, z: f64, w: f64) -> f64 {
-    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
+/// Heading of a rotation about z (any tilt is ignored), counter-clockwise from the parent's x;
+/// `None` for a quaternion of (nearly) zero or non-finite length (some drivers send zeros for
+/// "unknown").
+/// A unit quaternion is used as it is (so a written heading reads back to the bit); another is
+/// scaled to unit length first.
+fn yaw_of(x: f64, y: f64, z: f64, w: f64) -> Option<f64> {
+    let n2 = x * x + y * y + z * z + w * w;
+    if !n2.is_finite() || n2 <= 1e-12 {
+        return None;
+    }
+    let (x, y, z, w) = if (n2 - 1.0).abs() > 1e-9 {
+        let n = n2.sqrt();
+        (x / n, y / n, z / n, w / n)
+    } else {
+        (x, y, z, w)
+    };
+    Some((2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z)))
 }
 
 impl Decoded {
@@ -294,13 +417,12 @@ impl Decoded {
         &mut self,
         map: &TopicMap,
         role: Role,
-        message: &mcap::Message<'_>,
+        message: &Incoming<'_>,
         index: usize,
         stats: &mut AssemblyStats,
     ) -> Result<(), RecordingError> {
-        let topic = message.channel.topic.as_str();
-        let (schema, encoding) = schema_of(message);
-        let data: &[u8] = &message.data;
+        let (topic, schema, encoding) = (message.topic, message.schema, message.encoding);
+        let data = message.data;
         let decode_error = |e: String| RecordingError::Decode {
             topic: topic.to_owned(),
             index,
@@ -353,7 +475,9 @@ impl Decoded {
                             stamp_ns: ros_stamp(o.header.stamp)?,
                             x_m: p.x,
                             y_m: p.y,
-                            yaw_rad: yaw_of(q.x, q.y, q.z, q.w),
+                            yaw_rad: yaw_of(q.x, q.y, q.z, q.w).ok_or_else(|| {
+                                value_error("a zero-length orientation quaternion".to_owned())
+                            })?,
                         },
                         &value_error,
                     )?;
@@ -507,7 +631,9 @@ impl Decoded {
                 stamp_ns: t.timestamp.map_or(log_time, |s| s.total_nanos()),
                 x_m: p.x,
                 y_m: p.y,
-                yaw_rad: yaw_of(q.x, q.y, q.z, q.w),
+                yaw_rad: yaw_of(q.x, q.y, q.z, q.w).ok_or_else(|| {
+                    value_error("a zero-length orientation quaternion".to_owned())
+                })?,
             },
             value_error,
         )
@@ -559,17 +685,14 @@ fn frames_match(map: &TopicMap, parent: &str, child: &str) -> bool {
         && map.pose.child_frame_id.as_ref().is_none_or(|c| c == child)
 }
 
-/// The index of the sample nearest `t` within `tol` among `stamps` (sorted), skipping taken
-/// ones; ties go to the earlier sample.
-fn nearest(stamps: &[u64], taken: Option<&[bool]>, t: u64, tol: u64) -> Option<usize> {
+/// The index of the sample nearest `t` within `tol` among `stamps` (sorted); ties go to the
+/// earlier sample.
+fn nearest(stamps: &[u64], t: u64, tol: u64) -> Option<usize> {
     let first = stamps.partition_point(|&s| s < t.saturating_sub(tol));
     let mut best: Option<(u64, usize)> = None;
     for (i, &s) in stamps.iter().enumerate().skip(first) {
         if s > t.saturating_add(tol) {
             break;
-        }
-        if taken.is_some_and(|taken| taken[i]) {
-            continue;
         }
         let d = s.abs_diff(t);
         if best.is_none_or(|(bd, _)| d < bd) {
@@ -592,16 +715,34 @@ fn assemble(
     for shots in &mut d.shots {
         shots.sort_by_key(|s| s.stamp_ns);
     }
+    let pose_stamps: Vec<u64> = d.poses.iter().map(|p| p.stamp_ns).collect();
     let motion_stamps: Vec<u64> = d.motion.iter().map(|m| m.stamp_ns).collect();
     let imu_stamps: Vec<u64> = d.imu.iter().map(|m| m.stamp_ns).collect();
-    let shot_stamps: Vec<Vec<u64>> = d
-        .shots
-        .iter()
-        .map(|s| s.iter().map(|s| s.stamp_ns).collect())
-        .collect();
-    let mut taken: Vec<Vec<bool>> = d.shots.iter().map(|s| vec![false; s.len()]).collect();
+    // Each image goes to the pose nearest to it (within the tolerance); each pose keeps, per
+    // camera, the nearest of the images that chose it. No image is used twice and none is taken
+    // by an earlier pose that a later one is nearer to.
+    let mut chosen: Vec<[Option<(u64, usize)>; NUM_CAMERAS]> =
+        vec![[None; NUM_CAMERAS]; d.poses.len()];
+    for (k, shots) in d.shots.iter().enumerate() {
+        for (i, shot) in shots.iter().enumerate() {
+            let Some(p) = nearest(&pose_stamps, shot.stamp_ns, tol) else {
+                continue;
+            };
+            let dist = pose_stamps[p].abs_diff(shot.stamp_ns);
+            let slot = &mut chosen[p][k];
+            if slot.is_none_or(|(best, _)| dist < best) {
+                *slot = Some((dist, i));
+            }
+        }
+    }
     let mut frames = Vec::with_capacity(d.poses.len());
-    for (f, pose) in d.poses.iter().enumerate() {
+    let mut used = d.shots.each_ref().map(|s| vec![false; s.len()]);
+    for (f, (pose, picks)) in d.poses.iter().zip(&chosen).enumerate() {
+        if picks.iter().all(Option::is_none) {
+            // No camera at all: no step could run on it (the runtime needs one camera).
+            stats.poses_without_images += 1;
+            continue;
+        }
         let t = pose.stamp_ns;
         let no_motion = |topic: &str| RecordingError::NoMotion {
             topic: topic.to_owned(),
@@ -609,27 +750,26 @@ fn assemble(
             stamp_ns: t,
             tolerance_ms: map.time.tolerance_ms,
         };
-        let m =
-            nearest(&motion_stamps, None, t, tol).ok_or_else(|| no_motion(&map.motion.topic))?;
+        let m = nearest(&motion_stamps, t, tol).ok_or_else(|| no_motion(&map.motion.topic))?;
         let mut motion = d.motion[m].motion;
         if let Some(imu_topic) = &map.motion.imu_topic {
-            let i = nearest(&imu_stamps, None, t, tol).ok_or_else(|| no_motion(imu_topic))?;
+            let i = nearest(&imu_stamps, t, tol).ok_or_else(|| no_motion(imu_topic))?;
             motion.acceleration_mps2 = d.imu[i].motion.acceleration_mps2;
         } else if !d.motion[m].has_acceleration {
             // Odometry without an IMU: no acceleration is known; the runtime takes zero.
             motion.acceleration_mps2 = [0.0; 3];
         }
         let mut stamp_ns = t;
-        let cameras = core::array::from_fn(|k| {
-            let i = nearest(&shot_stamps[k], Some(&taken[k]), t, tol);
-            match i {
-                Some(i) => {
-                    taken[k][i] = true;
-                    stamp_ns = stamp_ns.max(shot_stamps[k][i]);
-                }
-                None => stats.missing[k] += 1,
+        let cameras = core::array::from_fn(|k| match picks[k] {
+            Some((_, i)) => {
+                used[k][i] = true;
+                stamp_ns = stamp_ns.max(d.shots[k][i].stamp_ns);
+                Some(i)
             }
-            i
+            None => {
+                stats.missing[k] += 1;
+                None
+            }
         });
         frames.push(RecordedFrame {
             stamp_ns,
@@ -638,8 +778,8 @@ fn assemble(
             cameras,
         });
     }
-    for (k, t) in taken.iter().enumerate() {
-        stats.unused[k] = t.iter().filter(|&&x| !x).count();
+    for (k, u) in used.iter().enumerate() {
+        stats.unused[k] = u.iter().filter(|&&x| !x).count();
     }
     Ok(Recording {
         frames,

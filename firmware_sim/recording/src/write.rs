@@ -20,7 +20,7 @@ use crate::json_schemas::{
     STEP_STATUS_SCHEMA,
 };
 use crate::read::{RecordedMotion, RecordedPose};
-use crate::topics::NUM_CAMERAS;
+use crate::topics::{MAX_TOLERANCE_MS, NUM_CAMERAS};
 
 /// Topic of camera `k`'s images.
 #[must_use]
@@ -60,8 +60,11 @@ pub const EGO_FRAME: &str = "ego";
 pub fn own_topics_toml(anchor: [f64; 3]) -> String {
     let [lat, lon, h] = anchor;
     let mut text = format!(
-        "# The topics of a `satmap-sim drive --mcap` file, for `drive --recording`.\n\
+        "# The topics of a `satmap-sim drive --mcap` file, for `drive --recording`. The \
+         tolerance is the largest: images carry their capture times, each joins its nearest \
+         step.\n\
          [anchor]\nlat_deg = {lat:?}\nlon_deg = {lon:?}\nheight_m = {h:?}\n\n\
+         [time]\ntolerance_ms = {MAX_TOLERANCE_MS:?}\n\n\
          [pose]\ntopic = \"{TF_TOPIC}\"\nparent_frame_id = \"{MAP_FRAME}\"\n\
          child_frame_id = \"{BODY_FRAME}\"\n\n[motion]\ntopic = \"{MOTION_TOPIC}\"\n"
     );
@@ -93,8 +96,11 @@ pub struct MapElement {
 pub struct StepMessages<'a> {
     /// The step's time, nanoseconds.
     pub stamp_ns: u64,
-    /// Per camera, its image as PNG, or `None` for a camera the step ran without.
+    /// Per camera, its image as PNG, or `None` for a camera missing from the step's frame.
     pub camera_png: [Option<&'a [u8]>; NUM_CAMERAS],
+    /// Per camera, how long before the step its image was captured, nanoseconds: the image is
+    /// stamped (and logged) that much earlier, so a replay of the file sees the same ages.
+    pub camera_age_ns: [u64; NUM_CAMERAS],
     /// The satellite crop as PNG, when the step had one.
     pub satellite_png: Option<&'a [u8]>,
     /// The predicted map.
@@ -222,8 +228,14 @@ impl<W: Write + Seek> DriveWriter<W> {
         let stamp = Some(fg::Timestamp::new(time.sec, time.nsec));
         for k in 0..NUM_CAMERAS {
             if let Some(png) = s.camera_png[k] {
-                let m = image(stamp, camera_frame_id(k), png);
-                self.put(self.channels.cameras[k], t, &m.encode_to_vec())?;
+                let captured = t.saturating_sub(s.camera_age_ns[k]);
+                let at = JsonTime::from_ns(captured).unwrap_or_default();
+                let m = image(
+                    Some(fg::Timestamp::new(at.sec, at.nsec)),
+                    camera_frame_id(k),
+                    png,
+                );
+                self.put(self.channels.cameras[k], captured, &m.encode_to_vec())?;
             }
         }
         if let Some(png) = s.satellite_png {

@@ -52,6 +52,8 @@ fn our_file() -> Vec<u8> {
             camera_png: core::array::from_fn(|c| {
                 (k != 1 || c != 2).then_some(images[c].as_slice())
             }),
+            // Camera 1 captured 5 ms before each step.
+            camera_age_ns: [0, 5_000_000, 0, 0, 0, 0],
             satellite_png: Some(&images[0]),
             predicted: std::slice::from_ref(&element),
             truth: &[],
@@ -94,6 +96,10 @@ fn our_file_reads_back_exactly_with_a_dropout_counted() {
         }
     }
     assert_eq!(rec.stats.missing, [0, 0, 1, 0, 0, 0]);
+    // The capture age comes back: camera 1 5 ms before its frame.
+    let f0 = &rec.frames[0];
+    assert_eq!(f0.stamp_ns, 1_000_000_000);
+    assert_eq!(rec.shot(0, 1).unwrap().stamp_ns, 995_000_000);
     // The satellite, maps, fix and status channels are not mapped; the body -> ego transform
     // is a pose of other frames.
     assert_eq!(rec.stats.other_frames, 3);
@@ -197,12 +203,13 @@ fn ros2_map(tolerance_ms: f64, frame_id: Option<&str>) -> TopicMap {
 
 #[test]
 fn ros2_odometry_and_images_assemble_by_time() {
-    // Images 10 ms after the first pose, 30 ms after the second: with 20 ms the second frame
-    // runs without cameras, with 50 ms both have them.
+    // Images 10 ms after the first pose, 30 ms after the second: with 20 ms the second pose
+    // has no image and is no frame; with 50 ms both are frames with every camera.
     let bytes = ros2_file(&[1010, 1530], &[1000, 1500], "cam");
     let tight = Recording::read(&bytes, &ros2_map(20.0, Some("cam"))).unwrap();
-    assert_eq!(tight.frames.len(), 2);
-    assert_eq!(tight.stats.missing, [1; 6]);
+    assert_eq!(tight.frames.len(), 1);
+    assert_eq!(tight.stats.poses_without_images, 1);
+    assert_eq!(tight.stats.missing, [0; 6]);
     assert_eq!(tight.stats.unused, [1; 6]);
     assert_eq!(
         tight.frames[0].stamp_ns, 1_010_000_000,
@@ -217,7 +224,14 @@ fn ros2_odometry_and_images_assemble_by_time() {
     assert_eq!(f.motion.acceleration_mps2, [0.0; 3]);
     assert_eq!(tight.shot(0, 3).unwrap().data, vec![3; 3]);
     let wide = Recording::read(&bytes, &ros2_map(50.0, None)).unwrap();
+    assert_eq!(wide.frames.len(), 2);
     assert_eq!(wide.stats.missing, [0; 6]);
+    // An image between two poses goes to the nearer one, not to the first in time: poses at
+    // 1000 and 1015 ms, images at 1014 ms join the second; the first has none.
+    let between = ros2_file(&[1014], &[1000, 1015], "cam");
+    let r = Recording::read(&between, &ros2_map(20.0, None)).unwrap();
+    assert_eq!(r.frames.len(), 1);
+    assert_eq!(r.frames[0].pose.stamp_ns, 1_015_000_000);
 }
 
 #[test]
@@ -343,4 +357,20 @@ fn a_record_longer_than_its_chunk_is_refused() {
         matches!(&e, RecordingError::Container(m) if m.contains("past its chunk")),
         "{e}"
     );
+}
+
+/// An attachment record shorter than its own header: the `mcap` crate's record parser slices
+/// past it (a panic); this reader never parses attachments.
+#[test]
+fn a_short_attachment_is_no_panic() {
+    let mut b = b"\x89MCAP0\r\n".to_vec();
+    // Header record: profile and library, both empty.
+    b.push(0x01);
+    b.extend(8u64.to_le_bytes());
+    b.extend([0u8; 8]);
+    // Attachment record of 32 bytes: times, empty name and media type, data length, no CRC.
+    b.push(0x09);
+    b.extend(32u64.to_le_bytes());
+    b.extend([0u8; 32]);
+    assert!(Recording::read(&b, &ours_map()).is_err());
 }

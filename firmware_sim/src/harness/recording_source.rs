@@ -92,11 +92,13 @@ impl RecordingSource {
         let s = &self.recording.stats;
         format!(
             "recording: {} frames from {} messages ({} on unmapped topics, {} poses of other \
-             frames); cameras missing from frames (dropout) {:?}, images joining no frame {:?}",
+             frames, {} poses without any image); cameras missing from frames (dropout) {:?}, \
+             images joining no frame {:?}",
             self.recording.frames.len(),
             s.messages,
             s.unmapped,
             s.other_frames,
+            s.poses_without_images,
             s.missing,
             s.unused
         )

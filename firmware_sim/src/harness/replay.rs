@@ -9,7 +9,7 @@ use satmap_runtime::bundle::Bundle;
 use satmap_runtime::calibration::NUM_CAMERAS;
 use satmap_runtime::capacity::layout;
 use satmap_runtime::engine_tract::TractEngine;
-use satmap_runtime::frame::{CameraImage, Frame, FrameLimits};
+use satmap_runtime::frame::{CameraImage, CameraState, Frame, FrameLimits};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::map_frame::MapFrame;
 use satmap_runtime::pose::{EgoMotion, EgoPose};
@@ -89,6 +89,10 @@ pub struct StepView<'a> {
     pub image_h_px: usize,
     /// Per camera, whether the step had its image.
     pub cameras_present: [bool; NUM_CAMERAS],
+    /// Per camera, the age of its image at the step (step time minus capture), microseconds.
+    pub camera_age_us: [u64; NUM_CAMERAS],
+    /// Per camera, how the runtime used it (used, missing, stale, invalid), when it published.
+    pub camera_states: Option<[CameraState; NUM_CAMERAS]>,
     /// The satellite crop the step fused, u8 RGB.
     pub crop_rgb: &'a [u8],
     /// Its geometry.
@@ -375,6 +379,8 @@ pub fn replay_observed(
                     image_w_px: dims.image_w,
                     image_h_px: dims.image_h,
                     cameras_present: sensor.cameras.map(|c| c.present),
+                    camera_age_us: sensor.cameras.map(|c| c.age_us),
+                    camera_states: satmap.last_map().map(|m| m.health.cameras),
                     crop_rgb: satmap.crop(),
                     crop_spec: dims.crop_spec(),
                     world_pose: sensor.world_pose,

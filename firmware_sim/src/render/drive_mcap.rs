@@ -13,6 +13,8 @@ use satmap_recording::{DriveWriter, MapElement, RecordedMotion, RecordedPose, St
 use serde::Serialize;
 
 use super::class_colour;
+use satmap_runtime::frame::CameraState;
+
 use crate::eval::MapVector;
 use crate::harness::degraded::DegradedReason;
 use crate::harness::{HarnessError, START_TIMESTAMP_US, StepObserver, StepView};
@@ -27,6 +29,7 @@ struct StepStatus<'a> {
     degraded_reason: Option<DegradedReason>,
     deadline_miss: bool,
     cameras_missing: Vec<usize>,
+    cameras: Option<[&'static str; 6]>,
     latency_us: indexmap::IndexMap<&'a str, u64>,
     memory: indexmap::IndexMap<&'static str, usize>,
 }
@@ -149,6 +152,14 @@ impl StepObserver for McapRecorder {
             degraded: r.degraded,
             degraded_reason: r.degraded_reason,
             deadline_miss: r.deadline_miss,
+            cameras: v.camera_states.map(|states| {
+                states.map(|c| match c {
+                    CameraState::Used => "used",
+                    CameraState::Missing => "missing",
+                    CameraState::Stale => "stale",
+                    CameraState::Invalid => "invalid",
+                })
+            }),
             cameras_missing: (0..v.cameras_present.len())
                 .filter(|&c| !v.cameras_present[c])
                 .collect(),
@@ -173,6 +184,7 @@ impl StepObserver for McapRecorder {
             .write_step(&StepMessages {
                 stamp_ns,
                 camera_png: core::array::from_fn(|c| cameras[c].as_deref()),
+                camera_age_ns: v.camera_age_us.map(|us| us * 1_000),
                 satellite_png: Some(&crop),
                 predicted: &predicted,
                 truth: &truth,
