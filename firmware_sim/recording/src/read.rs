@@ -4,7 +4,6 @@
 //! nearest to it. A camera without an image in its frame is absent (the runtime's dropout path),
 //! and counted; a pose without any image is no frame, and counted.
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 
 use foxglove::messages as fg;
@@ -554,17 +553,12 @@ impl Decoded {
                 }
             }
             Role::Camera(k) => {
-                let (stamp_ns, format, frame_id, bytes): (u64, String, Cow<'_, str>, Vec<u8>) =
+                let (stamp_ns, format, frame_id, bytes): (u64, String, String, Vec<u8>) =
                     match (schema, encoding) {
                         ("foxglove.CompressedImage", "protobuf") => {
                             let m = fg::CompressedImage::decode(data)
                                 .map_err(|e| decode_error(e.to_string()))?;
-                            (
-                                fg_stamp(m.timestamp),
-                                m.format,
-                                Cow::Owned(m.frame_id),
-                                m.data.to_vec(),
-                            )
+                            (fg_stamp(m.timestamp), m.format, m.frame_id, m.data.to_vec())
                         }
                         (ros2::COMPRESSED_IMAGE, ros2::CDR) => {
                             let m: ros2::CompressedImage =
@@ -572,7 +566,7 @@ impl Decoded {
                             (
                                 ros_stamp(m.header.stamp)?,
                                 m.format.0,
-                                Cow::Owned(m.header.frame_id.0),
+                                m.header.frame_id.0,
                                 m.data,
                             )
                         }
@@ -586,11 +580,7 @@ impl Decoded {
                 let format = ImageFormat::parse(&format).ok_or_else(|| {
                     value_error(format!("image format {format:?} is neither PNG nor JPEG"))
                 })?;
-                if let Some(want) = map
-                    .cameras
-                    .iter()
-                    .find(|c| c.index == k)
-                    .and_then(|c| c.frame_id.as_ref())
+                if let Some(want) = map.camera(k).and_then(|c| c.frame_id.as_ref())
                     && *want != frame_id
                 {
                     return Err(value_error(format!(

@@ -239,6 +239,12 @@ impl TopicMap {
         Ok(())
     }
 
+    /// The mapping of camera `index`, if any.
+    #[must_use]
+    pub fn camera(&self, index: usize) -> Option<&CameraTopic> {
+        self.cameras.iter().find(|c| c.index == index)
+    }
+
     /// The camera mapped to `topic`, if any.
     #[must_use]
     pub fn camera_of(&self, topic: &str) -> Option<&CameraTopic> {

@@ -128,12 +128,7 @@ impl RecordingSource {
                 slot.fill(0);
                 continue;
             };
-            let topic = self
-                .map
-                .cameras
-                .iter()
-                .find(|m| m.index == c)
-                .map_or("?", |m| m.topic.as_str());
+            let topic = self.map.camera(c).map_or("?", |m| m.topic.as_str());
             let format = match shot.format {
                 ImageFormat::Png => image::ImageFormat::Png,
                 ImageFormat::Jpeg => image::ImageFormat::Jpeg,

@@ -24,7 +24,7 @@ use super::degraded::DegradedReason;
 use super::rehearsal::{Rehearsal, rehearse};
 use super::report::StepRecord;
 use super::route_replay::tile_buffer;
-use super::source::{SensorFrame, open_scenario};
+use super::source::open_scenario;
 use super::timed_engine::{Timed, TimedEngine, micros_since};
 use super::timed_source::TimedSource;
 use super::{HarnessError, LastStep, Replay, ReplayConfig, START_TIMESTAMP_US};
@@ -262,7 +262,7 @@ pub fn replay_observed(
     let mut peak_bytes = 0;
     let mut last = None;
     for k in 0..frames {
-        let sensor: SensorFrame = host(alloc, || {
+        let sensor = host(alloc, || {
             source.frame(k, &mut images, dims.image_w, dims.image_h)
         })?;
         let compass_deg = 90.0 - sensor.world_pose.yaw_rad.to_degrees();

@@ -13,6 +13,7 @@ use satmap_recording::{DriveWriter, MapElement, RecordedMotion, RecordedPose, St
 use serde::Serialize;
 
 use super::class_colour;
+use satmap_runtime::calibration::NUM_CAMERAS;
 use satmap_runtime::frame::CameraState;
 
 use crate::eval::MapVector;
@@ -29,7 +30,7 @@ struct StepStatus<'a> {
     degraded_reason: Option<DegradedReason>,
     deadline_miss: bool,
     cameras_missing: Vec<usize>,
-    cameras: Option<[&'static str; 6]>,
+    cameras: Option<[&'static str; NUM_CAMERAS]>,
     latency_us: indexmap::IndexMap<&'a str, u64>,
     memory: indexmap::IndexMap<&'static str, usize>,
 }
