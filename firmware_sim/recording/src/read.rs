@@ -150,6 +150,7 @@ impl Recording {
     /// [`RecordingError`] naming the topic for a schema it cannot read or a message that does
     /// not decode, or the container's error.
     pub fn read(bytes: &[u8], map: &TopicMap) -> Result<Self, RecordingError> {
+        map.check()?;
         let mut d = Decoded::default();
         let mut stats = AssemblyStats::default();
         check_uncompressed_chunks(bytes)?;

@@ -188,7 +188,12 @@ impl TopicMap {
         Ok(map)
     }
 
-    fn check(&self) -> Result<(), TopicMapError> {
+    /// Check a mapping (its fields are public: one built or edited in code is checked again by
+    /// [`crate::Recording::read`], which indexes cameras by it).
+    ///
+    /// # Errors
+    /// [`TopicMapError`] naming the first problem.
+    pub fn check(&self) -> Result<(), TopicMapError> {
         let t = self.time.tolerance_ms;
         if !(t > 0.0 && t <= MAX_TOLERANCE_MS) {
             return Err(TopicMapError::Tolerance { value: t });

@@ -250,6 +250,15 @@ fn bad_inputs_are_named_errors() {
         matches!(&e, RecordingError::UnsupportedSchema { topic, schema, .. } if topic == "/odom" && schema == ros2::ODOMETRY),
         "{e}"
     );
+    // A mapping edited in code is checked again: no camera index past the rig.
+    let mut map = ros2_map(20.0, None);
+    map.cameras[5].index = 9;
+    assert!(matches!(
+        Recording::read(&bytes, &map),
+        Err(RecordingError::Topics(TopicMapError::CameraIndex {
+            index: 9
+        }))
+    ));
     let mut map = ros2_map(20.0, None);
     map.cameras[5].topic = "/nowhere".to_owned();
     let e = Recording::read(&bytes, &map).unwrap_err();
