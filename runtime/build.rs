@@ -18,19 +18,23 @@ fn fail(message: &str) -> ! {
     std::process::exit(0);
 }
 
-/// Whether the tests of the native products run here: they need AVX-512F (the products' only
-/// tier) on the machine that builds and runs them, the host, so a build for the host on a CPU
-/// with AVX-512F sets `satmap_avx512_tests`; elsewhere (an AVX2 machine, a cross build) those
-/// tests are reported as ignored with the reason, never a silent `ok`.
-/// `gemm::tests::the_native_tier_tests_run_where_this_cpu_has_the_tier` fails if the cfg and the
+/// Whether the tests of the native products run here: they need a native tier of
+/// `satmap-kernels` (AVX-512F, or AVX2 and FMA: `Tier::default_here`) on the machine that
+/// builds and runs them, the host, so a host build on such a CPU sets
+/// `satmap_native_tier_tests`; elsewhere (a CPU without either, a cross build) those tests are
+/// reported as ignored with the reason, never a silent `ok`.
+/// `gemm::tests::the_native_tier_tests_run_where_this_cpu_has_a_tier` fails if the cfg and the
 /// CPU disagree (a target folder built on another machine).
 fn native_tier_tests() {
-    println!("cargo::rustc-check-cfg=cfg(satmap_avx512_tests)");
+    println!("cargo::rustc-check-cfg=cfg(satmap_native_tier_tests)");
     let host = std::env::var("HOST").unwrap_or_default();
     let target = std::env::var("TARGET").unwrap_or_default();
     #[cfg(target_arch = "x86_64")]
-    if host == target && std::is_x86_feature_detected!("avx512f") {
-        println!("cargo::rustc-cfg=satmap_avx512_tests");
+    if host == target
+        && (std::is_x86_feature_detected!("avx512f")
+            || (std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")))
+    {
+        println!("cargo::rustc-cfg=satmap_native_tier_tests");
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = (host, target);

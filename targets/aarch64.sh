@@ -2,7 +2,8 @@
 # The application core, aarch64-unknown-linux-gnu, under user-mode emulation (qemu-aarch64 with
 # the CPU of targets/cross.env): the ECU tests (tests/ecu: the compiled f32/f16/int8 bundles
 # against the goldens, determinism within and across processes, 1 vs 2 threads, dropout, the
-# LUT, the C-API scenario's digests for this kernel family) and the C API's own tests, then the
+# LUT, the C-API scenario's digests for this kernel family), the kernels' tier tests (the NEON
+# tier against the generic one, bit for bit) and the C API's own tests, then the
 # C example cross-compiled with aarch64-linux-gnu-gcc and replayed (CRC checks, bit flips,
 # digests against examples/c/expected-<family>.txt). Run by `make test-aarch64`.
 #
@@ -15,12 +16,18 @@ TARGET=aarch64-unknown-linux-gnu
 OUT=target/cross/$TARGET/debug
 mkdir -p out
 
-echo "--- aarch64: build (the ECU build of the runtime, the C API, the ECU tests)"
-$CROSS cargo test --target $TARGET -p satmap-ecu-tests -p satmap-capi --no-run
+echo "--- aarch64: build (the ECU build of the runtime, the kernels, the C API, the ECU tests)"
+$CROSS cargo test --target $TARGET -p satmap-ecu-tests -p satmap-kernels -p satmap-capi --no-run
 
 echo "--- aarch64: tests under emulation"
 # The same cargo command runs them (cargo's runner is the emulator, targets/cross.env).
-$CROSS cargo test --target $TARGET -p satmap-ecu-tests -p satmap-capi 2>&1 | tee out/aarch64-tests.log
+$CROSS cargo test --target $TARGET -p satmap-ecu-tests -p satmap-kernels -p satmap-capi 2>&1 | tee out/aarch64-tests.log
+# The NEON tier's tests must have run here, not been ignored (tests/tiers.rs checks the cfg).
+neon=$(grep -c '^test aarch64_neon::.* ok$' out/aarch64-tests.log || true)
+if [[ "$neon" -ne 3 ]]; then
+  echo "aarch64: the NEON tier's 3 tests did not all run and pass ($neon)" >&2
+  exit 1
+fi
 passed=$(awk '/^test result:/ { for (i = 1; i <= NF; i++) if ($i == "passed;") n += $(i - 1) } END { print n + 0 }' out/aarch64-tests.log)
 
 echo "--- aarch64: the C example, cross-compiled and replayed"

@@ -15,7 +15,9 @@ use glam::{DVec2, Vec3};
 use safetensors::SafeTensors;
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine::{Engine, Stage};
-use satmap_runtime::engine_tract::{MAX_ENGINE_THREADS, Rewrites, TractEngine, kernel_family};
+use satmap_runtime::engine_tract::{
+    MAX_ENGINE_THREADS, Rewrites, TractEngine, gemm, kernel_family,
+};
 use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::satellite::FixedCrop;
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
@@ -55,6 +57,9 @@ pub struct StageTimes {
     pub threads: usize,
     /// tract's kernel family on this CPU (`engine_tract::kernel_family`).
     pub kernel_family: &'static str,
+    /// The satmap-kernels tier the native products ran on (`SATMAP_KERNEL_TIER` forces one),
+    /// or `"tract"` where tract's products ran.
+    pub kernel_tier: &'static str,
     /// `(stage, wall time of each repeat in ms)`, in pipeline order.
     pub stages_ms: Vec<(&'static str, Vec<f64>)>,
     /// With `--ops`: per stage, `(operator kind, ms)` of one node-by-node run, largest first
@@ -270,6 +275,7 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
         engine: "satmap",
         threads,
         kernel_family: kernel_family(),
+        kernel_tier: gemm::tier().map_or("tract", |t| t.name()),
         stages_ms,
         ops_ms,
         step_ms,

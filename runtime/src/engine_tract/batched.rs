@@ -377,8 +377,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn attention_products_run_natively_with_tracts_bits() {
         for (expr, sx, sy) in [
@@ -404,8 +404,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn batches_on_the_pool_keep_the_bits() {
         // 32 windows of 49 tokens: each product too small to split, the batches split.
@@ -455,8 +455,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::NativeBatched, native_batched);

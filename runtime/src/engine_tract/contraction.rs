@@ -224,7 +224,7 @@ mod tests {
             assert_eq!(bits(&got[0]), bits(&want[0]), "{expr}");
             // And then the linear layer pass takes it.
             let (linear, taken) = super::super::linear::native_linears(merged).unwrap();
-            if super::super::gemm::available() {
+            if super::super::gemm::tier().is_some() {
                 assert_eq!(taken, 1, "{expr}");
                 let native = run_optimized(linear, &inputs);
                 assert_eq!(bits(&native[0]), bits(&want[0]), "{expr} native");

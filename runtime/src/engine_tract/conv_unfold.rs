@@ -406,8 +406,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn resnet_shapes_run_unfolded_with_tracts_bits() {
         let cases = [
@@ -465,8 +465,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn direct_spatial_stems_run_unfolded_with_tracts_im2col_bits() {
         // `test`'s 8-channel stem and a 16-channel one, both run direct spatial by tract.
@@ -538,8 +538,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         // Every stage as tract's plan computes it with im2col (`test`'s stem is direct spatial

@@ -329,8 +329,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn linear_layers_run_natively_with_tracts_bits() {
         for (lead, k, n, transposed, bias) in [
@@ -387,8 +387,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::NativeLinears, native_linears);

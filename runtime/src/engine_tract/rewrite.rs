@@ -196,8 +196,9 @@ pub(crate) fn optimise_before(
     if runs(Pass::LayerNorms) {
         (model, done.layer_norms) = layer_norm::fuse_layer_norms(model)?;
     }
-    // The native product has an AVX-512 kernel only; elsewhere tract's products stay.
-    let native = gemm::available();
+    // The native product runs on a tier of satmap-kernels (AVX-512F or AVX2 + FMA by default);
+    // without one, or with `SATMAP_KERNEL_TIER=tract`, tract's products stay.
+    let native = gemm::chosen_tier()?.is_some();
     if runs(Pass::UnfoldConvs) && native {
         (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;
     }

@@ -1,27 +1,45 @@
-//! The native f32 matrix product the engine runs its large products on (AVX-512 tier).
+//! The native f32 matrix product the engine runs its large products on, over the micro-kernel
+//! tiers of `satmap-kernels` ([`tier`]).
 //!
 //! `C[m, n] = A[m, k] B[k, n]`, then a bias per row or column, with the operands packed into
 //! panels ([`pack`]) and `k` taken in blocks of [`KC`] so that a block of an A panel stays in
 //! L1 while the B panels of a column block ([`NC_PANELS`]) stream from L2; the micro-kernel
-//! ([`kernel`]) keeps a 12 x 32 tile of C in 24 registers. tract 0.23.9 runs these products
+//! (`satmap_kernels::gemm::run`) computes one 12 x 32 tile of C. tract 0.23.9 runs these products
 //! with a 16 x 12 tile over the whole of `k` (one load per multiply-add, panels streamed from
 //! L2 or beyond) at 53-57% of this core's peak (docs/perf.md).
 //!
 //! Bits: every output is one fused multiply-add chain over `k` ascending from zero, and the
 //! bias is added to the finished sum: what tract's f32 kernels compute (their tiles hold one
 //! accumulator per output and start from zero; each rewrite's tests compare with tract's plan
-//! bit for bit). The threads split C in whole row panels or column panels ([`product`]); an
-//! output's arithmetic does not depend on which thread computes it, so the bits hold for any
-//! thread count.
-
-pub mod kernel;
-pub mod pack;
+//! bit for bit), on every tier alike. The threads split C in whole row panels or column panels
+//! ([`product`]); an output's arithmetic does not depend on which thread computes it, so the
+//! bits hold for any thread count.
 
 use rayon::prelude::*;
+use satmap_kernels::gemm::Tile;
+use satmap_kernels::{Tier, TierError};
 use tract_linalg::multithread::{Executor, current_tract_executor};
 
-pub use kernel::{TileBias, TileFinish, available};
-pub use pack::{AlignedBuf, MR, NR, PackedA, PackedB, panels};
+pub use satmap_kernels::gemm::pack;
+pub use satmap_kernels::gemm::{
+    AlignedBuf, MR, NR, PackedA, PackedB, TileBias, TileFinish, floor, panels,
+};
+
+/// The tier this process runs the native products on: `SATMAP_KERNEL_TIER`'s, or the widest
+/// the CPU has (`None`: tract's products stay, and the rewrites that plan this product do not
+/// run).
+///
+/// # Errors
+/// `SATMAP_KERNEL_TIER` naming no tier, or one this CPU lacks: the engine refuses to load.
+pub fn chosen_tier() -> Result<Option<Tier>, TierError> {
+    Tier::chosen()
+}
+
+/// [`chosen_tier`] where the variable was good (the engine loaded).
+#[must_use]
+pub fn tier() -> Option<Tier> {
+    Tier::chosen().ok().flatten()
+}
 
 /// `k` a block: 12 x 256 f32 of an A panel (12 KiB) stay in L1 across a column block.
 pub const KC: usize = 256;
@@ -83,13 +101,6 @@ impl Finish<'_> {
     }
 }
 
-/// `v.max(s)` with the bits the kernel's floor and LLVM's x86 lowering of `f32::max` give it
-/// ([`kernel`]): `s` for a NaN `v`, else `s > v ? s : v` (so `v` for equal zeros).
-#[must_use]
-pub fn floor(v: f32, s: f32) -> f32 {
-    if v.is_nan() || s > v { s } else { v }
-}
-
 /// `fill(j, pc, kc, dst)` of [`BSource::Fill`].
 pub type FillPanels<'a> = dyn Fn(usize, usize, usize, &mut [f32]) + Sync + 'a;
 
@@ -137,7 +148,7 @@ impl Operands<'_> {
 /// The product into `c` (`m` rows of `n` values, row `r` at `r * ldc`, [`Operands::c_len`]
 /// long; the values between rows untouched) on the engine's threads, split as `blocks`
 /// says, `bias` added to the finished sums. `false` (C in an unspecified state)
-/// for operands or a bias shorter than their sizes, or a CPU without AVX-512: the rewrites that
+/// for operands or a bias shorter than their sizes, or no native [`tier`]: the rewrites that
 /// plan this product check both, so that is a bug, never input.
 #[must_use]
 pub fn product(ops: &Operands<'_>, c: &mut [f32], bias: Bias<'_>) -> bool {
@@ -162,7 +173,7 @@ pub fn product_then(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>) -> bo
             Bias::PerCol(v) => v.len() >= n,
         }
         && finish.residual.is_none_or(|res| res.len() >= m * n);
-    if !sized || ldc < n || c.len() != ops.c_len() || !available() {
+    if !sized || ldc < n || c.len() != ops.c_len() || tier().is_none() {
         return false;
     }
     if m == 0 || n == 0 {
@@ -442,6 +453,9 @@ impl Block<'_> {
         finish: Finish<'_>,
     ) -> bool {
         let Self { pc, kc, .. } = *self;
+        let Some(tier) = tier() else {
+            return false;
+        };
         let last = pc + kc == k;
         for ii in 0..rows_here.div_ceil(MR) {
             let i = first + ii;
@@ -466,16 +480,19 @@ impl Block<'_> {
                 } else {
                     TileFinish::NONE
                 };
-                let done = kernel::run(kernel::Tile {
-                    a: a_blk,
-                    b: b_blk,
-                    c: &mut rows[ii * MR * ldc + (j - self.c_first) * NR..],
-                    ldc,
-                    rows: MR.min(rows_here - ii * MR),
-                    cols: NR.min(n - j * NR),
-                    accumulate: pc > 0,
-                    finish: tile_finish,
-                });
+                let done = satmap_kernels::gemm::run(
+                    tier,
+                    Tile {
+                        a: a_blk,
+                        b: b_blk,
+                        c: &mut rows[ii * MR * ldc + (j - self.c_first) * NR..],
+                        ldc,
+                        rows: MR.min(rows_here - ii * MR),
+                        cols: NR.min(n - j * NR),
+                        accumulate: pc > 0,
+                        finish: tile_finish,
+                    },
+                );
                 if !done {
                     return false;
                 }
@@ -648,8 +665,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn finishes_add_the_residual_and_floor_after_the_bias_bit_for_bit() {
         // Every split: rows (few columns, deep), whole B (`rows_outer`), columns (filled B),
@@ -694,22 +711,35 @@ mod tests {
         assert!(!product_then(&ops, &mut [0.0; 12], short));
     }
 
-    /// The native-tier tests above are ignored without AVX-512F; this fails when they are
-    /// ignored on a CPU that has it (or compiled in on one that lacks it), so a machine with the
-    /// tier never reports them skipped.
+    /// The native-tier tests above are ignored on a CPU without a native tier; this fails when
+    /// they are ignored on a CPU that has one (or compiled in on one that lacks it), so a
+    /// machine with a tier never reports them skipped.
     #[test]
-    fn the_native_tier_tests_run_where_this_cpu_has_the_tier() {
+    fn the_native_tier_tests_run_where_this_cpu_has_a_tier() {
+        let here = Tier::default_here();
         assert_eq!(
-            cfg!(satmap_avx512_tests),
-            available(),
-            "the native-tier tests are built for a CPU {} AVX-512F, this one {} it: rebuild here",
-            if cfg!(satmap_avx512_tests) {
+            cfg!(satmap_native_tier_tests),
+            here.is_some(),
+            "the native-tier tests are built for a CPU {} a native tier, this one has {here:?}: \
+             rebuild here",
+            if cfg!(satmap_native_tier_tests) {
                 "with"
             } else {
                 "without"
             },
-            if available() { "has" } else { "lacks" },
         );
+        if cfg!(satmap_native_tier_tests) {
+            // They run on the tier the variable forces, if any: never on none.
+            assert!(
+                tier().is_some(),
+                "SATMAP_KERNEL_TIER={:?} leaves no native tier for the engine's tests",
+                std::env::var("SATMAP_KERNEL_TIER")
+            );
+            eprintln!(
+                "native products tested on the {} tier",
+                tier().map_or("-", Tier::name)
+            );
+        }
     }
 
     #[test]
@@ -737,8 +767,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn products_are_the_fma_chain_bit_for_bit() {
         // Edges in m (13, 25), n (33, 70), k across blocks (257, 600) and a whole multiple.
@@ -760,8 +790,8 @@ mod tests {
 
     #[test]
     #[cfg_attr(
-        not(satmap_avx512_tests),
-        ignore = "needs AVX-512F, the native products' only tier: not on this CPU"
+        not(satmap_native_tier_tests),
+        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
     )]
     fn threads_split_rows_and_columns_without_moving_a_bit() {
         let pool = std::sync::Arc::new(

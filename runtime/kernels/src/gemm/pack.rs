@@ -4,12 +4,12 @@
 //! values `A[i * MR + r][k]` side by side (zeros past the last row). B is packed in panels of
 //! [`NR`] columns: panel `j` holds, for each `k`, `B[k][j * NR + c]` (zeros past the last
 //! column). A panel is whole in `k`, so a block of `k` is a contiguous slice of it and the
-//! blocking of [`super::product`] needs no format of its own. Every panel starts on a 64-byte
+//! engine's blocking of the product needs no format of its own. Every panel starts on a 64-byte
 //! line ([`AlignedBuf`]): the kernel's vector loads never split a cache line.
 
 /// Rows of an A panel (the broadcast side of the kernel).
 pub const MR: usize = 12;
-/// Columns of a B panel (two 16-lane vectors).
+/// Columns of a B panel (two 16-lane vectors, four 8-lane, eight 4-lane).
 pub const NR: usize = 32;
 
 /// Values per 64-byte line.

@@ -1,0 +1,15 @@
+//! satmap-kernels: the engine's numeric kernels, each a portable `generic` implementation that
+//! defines the bits with per-instruction-set implementations beside it, and the one rule that
+//! chooses the tier ([`tier`]). May import: std only (no tract, no runtime crate).
+//!
+//! Today: the f32 product's micro-kernel and its packed operand formats ([`gemm`]), with tiers
+//! for AVX-512F, AVX2 + FMA and NEON. Every tier computes every output as the same fused
+//! multiply-add chain (`k` ascending from zero or from the stored partial sum) followed by the
+//! same f32 finish, so every tier gives the generic tier's bits (NaN payloads aside, which each
+//! instruction set picks its own way); `tests/gemm_tiers.rs` runs the same tests for every tier.
+//! A tier whose instructions this CPU lacks is never called: [`gemm::run`] refuses it.
+
+pub mod gemm;
+pub mod tier;
+
+pub use tier::{Tier, TierError};
