@@ -11,7 +11,7 @@ PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-python test-paper test-c lint nostd venv train fuzz fuzz-ci \
+.PHONY: demo test test-rust test-tiers test-python test-paper test-c lint nostd venv train fuzz fuzz-ci \
   fuzz-parsers bench-peers \
   cross-toolchain test-aarch64 test-baremetal test-targets insn-counts
 
@@ -33,7 +33,7 @@ test:
 	@{ $(MAKE) --no-print-directory venv > out/venv.log 2>&1; echo $$? > out/venv.rc; } & \
 	  { $(MAKE) --no-print-directory cross-toolchain > out/cross-toolchain.log 2>&1; \
 	    echo $$? > out/cross-toolchain.rc; } & \
-	  $(MAKE) --no-print-directory lint nostd test-rust test-c fuzz-ci; rust=$$?; wait; \
+	  $(MAKE) --no-print-directory lint nostd test-rust test-tiers test-c fuzz-ci; rust=$$?; wait; \
 	  echo "--- make venv (run beside the Rust steps):"; cat out/venv.log; \
 	  echo "--- make cross-toolchain (run beside the Rust steps):"; cat out/cross-toolchain.log; \
 	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0 && test "$$(cat out/cross-toolchain.rc)" -eq 0
@@ -52,6 +52,17 @@ nostd:
 
 test-rust:
 	$(CARGO) test --workspace --exclude satmap-nostd-check
+
+# The engine's native passes (each bit for bit against tract's plan) and the demo drive's pinned
+# digest once more on the AVX2 + FMA tier of satmap-kernels, forced (SATMAP_KERNEL_TIER), on an
+# AVX-512 CPU: every tier gives the same bits, so the default tier's pins hold (the tiers' own
+# tests are in test-rust; NEON's run in test-aarch64). ~15 s with test-rust's binaries.
+test-tiers:
+	@if grep -qw avx512f /proc/cpuinfo; then \
+	  echo "SATMAP_KERNEL_TIER=avx2-fma: the engine's passes and the demo digest"; \
+	  SATMAP_KERNEL_TIER=avx2-fma $(CARGO) test --workspace --exclude satmap-nostd-check \
+	    --lib --test harness_arena -- engine_tract demo_drive; \
+	else echo "test-tiers: skipped, this CPU lacks AVX-512F (the engine's native tests are built where it is)"; fi
 
 # Coverage-guided fuzzing (cargo fuzz, libFuzzer) of the parsers of outside bytes: 8 targets under fuzz/
 # (archive, signed bundle, NNEF stage and text, map frame, route pack, manifest, MCAP recording), each

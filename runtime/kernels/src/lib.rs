@@ -7,7 +7,8 @@
 //! multiply-add chain (`k` ascending from zero or from the stored partial sum) followed by the
 //! same f32 finish, so every tier gives the generic tier's bits (NaN payloads aside, which each
 //! instruction set picks its own way); `tests/gemm_tiers.rs` runs the same tests for every tier.
-//! A tier whose instructions this CPU lacks is never called: [`gemm::run`] refuses it.
+//! A tier whose instructions this CPU lacks is never called: [`gemm::run`] refuses it. The
+//! default is AVX-512F where present ([`Tier::default_here`]); the others run when forced.
 
 pub mod gemm;
 pub mod tier;

@@ -1,5 +1,5 @@
 //! The instruction-set tiers of the kernels and the one rule that chooses the tier a process
-//! runs: the widest x86 tier the CPU has, none on aarch64 (tract's own NEON kernels stay, see
+//! runs: AVX-512F where the CPU has it, none elsewhere (tract's own kernels stay, see
 //! [`Tier::default_here`]), or what `SATMAP_KERNEL_TIER` forces.
 
 use std::sync::OnceLock;
@@ -66,15 +66,16 @@ impl Tier {
         }
     }
 
-    /// The tier the engine's products run on when nothing is forced: AVX-512F, else AVX2 + FMA
-    /// on x86-64; none elsewhere. On aarch64 tract's hand-written NEON kernels keep the
-    /// products until instruction counts show the NEON tier ahead (docs/perf.md, "Kernel
-    /// tiers"); forcing `neon` runs it.
+    /// The tier the engine's products run on when nothing is forced: AVX-512F where the CPU
+    /// has it, none elsewhere. The AVX2 + FMA and NEON tiers give the same bits but run only
+    /// when forced: on a CPU whose best is AVX2 or NEON, tract runs its own AVX2 or NEON kernels
+    /// today, and neither the speed of our tier against them nor those families' pinned
+    /// digests with our tier (the native passes sum the image stem in another order than
+    /// tract's direct convolution) has been measured on such a CPU yet (docs/perf.md, "Kernel
+    /// tiers").
     #[must_use]
     pub fn default_here() -> Option<Self> {
-        [Self::X86_64Avx512f, Self::X86_64Avx2Fma]
-            .into_iter()
-            .find(|t| t.runs_here())
+        Some(Self::X86_64Avx512f).filter(|t| t.runs_here())
     }
 
     /// The tier a value of [`TIER_ENV`] asks for (`None`: tract's products).

@@ -275,7 +275,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn attention_runs_fused_with_the_unfused_bits() {
         // Query counts with an edge panel; key counts of one and several B panels.
@@ -316,7 +316,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::FusedAttention, fuse_attention);

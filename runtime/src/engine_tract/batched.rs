@@ -378,7 +378,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn attention_products_run_natively_with_tracts_bits() {
         for (expr, sx, sy) in [
@@ -405,7 +405,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn batches_on_the_pool_keep_the_bits() {
         // 32 windows of 49 tokens: each product too small to split, the batches split.
@@ -456,7 +456,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::NativeBatched, native_batched);

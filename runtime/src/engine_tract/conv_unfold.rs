@@ -407,7 +407,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn resnet_shapes_run_unfolded_with_tracts_bits() {
         let cases = [
@@ -466,7 +466,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn direct_spatial_stems_run_unfolded_with_tracts_im2col_bits() {
         // `test`'s 8-channel stem and a 16-channel one, both run direct spatial by tract.
@@ -539,7 +539,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         // Every stage as tract's plan computes it with im2col (`test`'s stem is direct spatial

@@ -361,7 +361,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn resnet_blocks_take_their_shortcut_and_relu_with_tracts_bits() {
         for s in [
@@ -376,7 +376,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn linear_layers_take_their_residual_and_relu_with_tracts_bits() {
         // The BEV encoder's feed-forward layers (3200 tokens), a few tokens, no bias.
@@ -423,7 +423,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::Epilogues, fuse_epilogues);

@@ -355,7 +355,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn pointwise_convolutions_run_natively_with_tracts_bits() {
         for s in [
@@ -383,7 +383,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn strided_projections_gather_the_map_they_were_downsampled_from() {
         // ResNet's shortcut projections (stride 2, odd and even maps), with and without the
@@ -438,7 +438,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn rewritten_stages_compute_what_they_computed_bit_for_bit() {
         assert_pass_keeps_stage_bits(Pass::PointwiseConvs, native_pointwise_convs);

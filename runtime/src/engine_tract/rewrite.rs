@@ -196,8 +196,8 @@ pub(crate) fn optimise_before(
     if runs(Pass::LayerNorms) {
         (model, done.layer_norms) = layer_norm::fuse_layer_norms(model)?;
     }
-    // The native product runs on a tier of satmap-kernels (AVX-512F or AVX2 + FMA by default);
-    // without one, or with `SATMAP_KERNEL_TIER=tract`, tract's products stay.
+    // The native product runs on a tier of satmap-kernels (AVX-512F by default, another when
+    // `SATMAP_KERNEL_TIER` forces it); without one, or with `tract` forced, tract's stay.
     let native = gemm::chosen_tier()?.is_some();
     if runs(Pass::UnfoldConvs) && native {
         (model, done.unfolded_convs) = conv_unfold::unfold_convs(model)?;

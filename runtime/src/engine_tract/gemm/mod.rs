@@ -25,9 +25,9 @@ pub use satmap_kernels::gemm::{
     AlignedBuf, MR, NR, PackedA, PackedB, TileBias, TileFinish, floor, panels,
 };
 
-/// The tier this process runs the native products on: `SATMAP_KERNEL_TIER`'s, or the widest
-/// the CPU has (`None`: tract's products stay, and the rewrites that plan this product do not
-/// run).
+/// The tier this process runs the native products on: `SATMAP_KERNEL_TIER`'s, or AVX-512F
+/// where the CPU has it (`None`: tract's products stay, and the rewrites that plan this product
+/// do not run).
 ///
 /// # Errors
 /// `SATMAP_KERNEL_TIER` naming no tier, or one this CPU lacks: the engine refuses to load.
@@ -666,7 +666,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn finishes_add_the_residual_and_floor_after_the_bias_bit_for_bit() {
         // Every split: rows (few columns, deep), whole B (`rows_outer`), columns (filled B),
@@ -768,7 +768,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn products_are_the_fma_chain_bit_for_bit() {
         // Edges in m (13, 25), n (33, 70), k across blocks (257, 600) and a whole multiple.
@@ -791,7 +791,7 @@ mod tests {
     #[test]
     #[cfg_attr(
         not(satmap_native_tier_tests),
-        ignore = "needs a native product tier (AVX-512F, or AVX2 and FMA): not on this CPU"
+        ignore = "needs the default native product tier (AVX-512F): not on this CPU"
     )]
     fn threads_split_rows_and_columns_without_moving_a_bit() {
         let pool = std::sync::Arc::new(
