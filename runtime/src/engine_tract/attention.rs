@@ -20,7 +20,8 @@ use tract_nnef::internal::*;
 
 use super::batched::{BatchedProduct, as_batched};
 use super::gemm::{self, MR, pack};
-use super::rewrite::replace_with_op;
+use super::graph_match::replace_with_op;
+use super::pool;
 use super::softmax::{RowSoftmax, SumOrder, softmax_block};
 
 /// `softmax(scores) . v` with `scores = q . k` over the last axis, per batch (head).
@@ -87,7 +88,7 @@ impl EvalOp for FusedAttention {
                 s.pack_b(true, &k_all[ok..], kt);
                 p.pack_b(true, &vs[ov..], vp);
                 // One task per query panel: its rows of the output.
-                gemm::on_threads(true, c, MR * ldc, |i, rows| {
+                pool::on_threads(true, c, MR * ldc, |i, rows| {
                     let here = MR.min(m - i * MR);
                     pack::with_scratch(2 * MR * keys + MR * d, |buf| {
                         // The probabilities first: their rows start on 64-byte lines, as the

@@ -15,6 +15,7 @@ use tract_nnef::internal::*;
 
 use super::gemm::{self, MR, NR, pack};
 use super::linear::f32_einsum;
+use super::pool;
 
 /// Rows from which a product runs natively (fewer: tract's matrix-vector kernels, another sum
 /// order).
@@ -95,7 +96,7 @@ impl EvalOp for BatchedProduct {
         let c_all = po.as_slice_mut::<f32>()?;
         let (m, n, k) = (self.m.len, self.n.len, self.k.len);
         let batches: usize = self.batch.iter().map(|b| b.len).product();
-        let done = if gemm::worth_threads(m * n * k) || !gemm::worth_threads(batches * m * n * k) {
+        let done = if pool::worth_threads(m * n * k) || !pool::worth_threads(batches * m * n * k) {
             // Large products split within; tiny ones in all stay on this thread.
             (0..batches).all(|index| {
                 let [oa, ob, oc] = self.offsets(index);
@@ -106,7 +107,7 @@ impl EvalOp for BatchedProduct {
             // Many small ones (the Swin windows): batches split over the pool, each into a C of
             // its own scattered into place (batches' rows may interleave in the output).
             let shared = std::sync::Mutex::new(&mut *c_all);
-            gemm::on_pool(batches, |index| {
+            pool::on_pool(batches, |index| {
                 let [oa, ob, oc] = self.offsets(index);
                 pack::with_scratch(m * n, |local| {
                     if !self.one(&a_all[oa..], &b_all[ob..], local, n) {
@@ -162,7 +163,7 @@ impl BatchedProduct {
     /// One batch's A read from `src` (at its offset) into `dst` ([`Self::a_len`] values).
     pub(crate) fn pack_a(&self, parallel: bool, src: &[f32], dst: &mut [f32]) {
         let (m, k) = (self.m.len, self.k.len);
-        gemm::on_threads(parallel, dst, MR * k, |i, panel| {
+        pool::on_threads(parallel, dst, MR * k, |i, panel| {
             pack::pack_a_panel_strided(src, (m, k), (self.m.a, self.k.a), i, panel);
             true
         });
@@ -171,7 +172,7 @@ impl BatchedProduct {
     /// One batch's B read from `src` (at its offset) into `dst` ([`Self::b_len`] values).
     pub(crate) fn pack_b(&self, parallel: bool, src: &[f32], dst: &mut [f32]) {
         let (k, n) = (self.k.len, self.n.len);
-        gemm::on_threads(parallel, dst, NR * k, |j, panel| {
+        pool::on_threads(parallel, dst, NR * k, |j, panel| {
             pack::pack_b_panel_strided(src, (k, n), (self.k.b, self.n.b), j, panel);
             true
         });
@@ -181,7 +182,7 @@ impl BatchedProduct {
     /// `ldc` apart).
     fn one(&self, a_src: &[f32], b_src: &[f32], c: &mut [f32], ldc: usize) -> bool {
         let (m, n, k) = (self.m.len, self.n.len, self.k.len);
-        let parallel = gemm::worth_threads(m * n * k);
+        let parallel = pool::worth_threads(m * n * k);
         let a_len = self.a_len();
         pack::with_scratch(a_len + self.b_len(), |scratch| {
             let (a, b) = scratch.split_at_mut(a_len);

@@ -30,9 +30,9 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::{Conv, PoolSpec};
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
-use super::epilogue::Epilogue;
+use super::finish::Epilogue;
 use super::gemm::{self, NR, PackedA};
-use super::rewrite::replace_with_op;
+use super::graph_match::replace_with_op;
 
 /// The patches of a 2-D convolution of `[1, C, H, W]`, as a `[C * kh * kw, OH * OW]` matrix
 /// would hold them: row `(c * kh + ky) * kw + kx`, zeros where a tap falls in the padding.

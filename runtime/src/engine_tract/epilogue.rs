@@ -11,11 +11,11 @@
 //! (`nano`'s BEV encoder: 1.7 of 19.9 ms). [`fuse_epilogues`] takes them into the
 //! [`UnfoldConv`], [`PointwiseConv`] or [`PackedLinear`] before them: the product's
 //! micro-kernel adds the shortcut and applies the floor to each tile while it is still in
-//! registers ([`gemm::Finish`]).
+//! registers ([`super::gemm::Finish`]).
 //!
 //! Bit for bit: the graph computes `((sum + bias) + shortcut).max(0)`, one f32 step each, and
 //! so does the kernel, in that order; the `max` with tract's bits (its by-scalar `Max` is
-//! Rust's `f32::max` compiled for x86: [`gemm::floor`], a NaN giving the floor). This module's
+//! Rust's `f32::max` compiled for x86: [`super::gemm::floor`], a NaN giving the floor). This module's
 //! tests check ResNet blocks and feed-forward layers built here and every stage of the
 //! committed default bundle against the engine's plan before the pass. (tract's own plan of a
 //! linear layer fuses a `Max` into its product kernel, where a NaN stays NaN; the engine ran
@@ -25,101 +25,10 @@
 use tract_nnef::internal::*;
 
 use super::conv_unfold::UnfoldConv;
-use super::gemm;
+use super::finish::Epilogue;
+use super::graph_match::{bin_inputs, only_successor, replace_with_op};
 use super::linear::PackedLinear;
 use super::pointwise::PointwiseConv;
-use super::rewrite::{bin_inputs, only_successor, replace_with_op};
-
-/// The steps a native convolution takes after its bias.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Epilogue {
-    /// A shortcut of the output's shape is added (the op's second input).
-    pub residual: bool,
-    /// `max(v, floor)` last.
-    pub floor: Option<f32>,
-}
-
-impl PartialEq for Epilogue {
-    fn eq(&self, other: &Self) -> bool {
-        self.residual == other.residual
-            && self.floor.map(f32::to_bits) == other.floor.map(f32::to_bits)
-    }
-}
-impl Eq for Epilogue {}
-
-impl Epilogue {
-    /// Whether there is no step at all.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        !self.residual && self.floor.is_none()
-    }
-
-    /// The op's inputs: the map first, then the shortcut where there is one.
-    #[must_use]
-    pub fn inputs(&self) -> usize {
-        1 + usize::from(self.residual)
-    }
-
-    /// The values of the shortcut among an op's `inputs`, checked against the op's `output`
-    /// shape: `None` without a residual step.
-    ///
-    /// # Errors
-    /// A missing shortcut, or one of another shape or type (the plan's, so a bug).
-    pub fn shortcut<'a>(
-        &self,
-        inputs: &'a [TValue],
-        output: &[usize],
-    ) -> TractResult<Option<&'a [f32]>> {
-        ensure!(
-            inputs.len() == self.inputs(),
-            "{} inputs, expected {}",
-            inputs.len(),
-            self.inputs()
-        );
-        if !self.residual {
-            return Ok(None);
-        }
-        let r = &inputs[1];
-        ensure!(
-            r.shape() == output && r.datum_type() == f32::datum_type(),
-            "shortcut {:?} {:?}, expected f32 {output:?}",
-            r.datum_type(),
-            r.shape()
-        );
-        Ok(Some(r.try_as_plain_ram()?.as_slice::<f32>()?))
-    }
-
-    /// The product's finish: `bias`, then `residual`'s values, then the floor.
-    #[must_use]
-    pub fn finish<'a>(
-        &self,
-        bias: gemm::Bias<'a>,
-        residual: Option<&'a [f32]>,
-    ) -> gemm::Finish<'a> {
-        gemm::Finish {
-            bias,
-            residual,
-            floor: self.floor,
-        }
-    }
-
-    /// The op's output facts: `output` in f32, after checking the input facts.
-    ///
-    /// # Errors
-    /// Inputs of another count, type or (shortcut) shape.
-    pub fn output_facts(
-        &self,
-        inputs: &[&TypedFact],
-        output: &[usize],
-    ) -> TractResult<TVec<TypedFact>> {
-        ensure!(inputs.len() == self.inputs());
-        ensure!(inputs.iter().all(|f| f.datum_type == f32::datum_type()));
-        if self.residual {
-            ensure!(inputs[1].shape.as_concrete() == Some(output));
-        }
-        Ok(tvec!(f32::fact(output)))
-    }
-}
 
 /// The native products that take an [`Epilogue`].
 enum Finishable<'a> {
@@ -232,6 +141,7 @@ mod tests {
     //! here (3x3 and 1x1 convolutions, linear layers, with and without the shortcut) and every
     //! stage of the committed default bundle.
     use super::*;
+    use crate::engine_tract::gemm;
     use crate::engine_tract::rewrite::Pass;
     use crate::engine_tract::test_support::{
         ConvShape, assert_pass_keeps_stage_bits, bits, conv_model, linear_model, on_two_threads,

@@ -17,8 +17,8 @@ use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::element_wise::ElementWiseOp;
 
-use super::gemm;
-use super::rewrite::{bin_inputs, const_operand, only_successor, replace_with_op};
+use super::graph_match::{bin_inputs, const_operand, only_successor, replace_with_op};
+use super::pool;
 
 /// Values a task computes at once: its tanh inputs stay in L1 between the three steps.
 const BLOCK_VALUES: usize = 1024;
@@ -106,8 +106,8 @@ impl EvalOp for TanhGelu {
         let tanh = Func::Tanh.ew_f32()?;
         let mut plain = y.try_as_plain_ram_mut()?;
         let values = plain.as_slice_mut::<f32>()?;
-        let parallel = gemm::worth_threads(values.len() * 16);
-        let done = gemm::on_threads(parallel, values, 4 * BLOCK_VALUES, |_, chunk| {
+        let parallel = pool::worth_threads(values.len() * 16);
+        let done = pool::on_threads(parallel, values, 4 * BLOCK_VALUES, |_, chunk| {
             let mut arg = [0.0f32; BLOCK_VALUES];
             chunk
                 .chunks_mut(BLOCK_VALUES)

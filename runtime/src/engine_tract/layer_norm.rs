@@ -18,7 +18,8 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::nn::{Reduce, Reducer, RmsNorm};
 
 use super::gemm;
-use super::rewrite::{bin_inputs as bin, const_operand, only_successor, replace_with_op};
+use super::graph_match::{bin_inputs as bin, const_operand, only_successor, replace_with_op};
+use super::pool;
 
 /// Rows a task normalises at least (the pool's dispatch against a row of a few dozen values).
 const ROWS_PER_TASK: usize = 64;
@@ -116,9 +117,9 @@ impl EvalOp for LayerNorm {
         }
         let sum = Func::ReduceSum.reduce_f32()?;
         let rms = tract_linalg::routines::rms_norm_f32()?;
-        let parallel = gemm::worth_threads(ys.len() * 8);
+        let parallel = pool::worth_threads(ys.len() * 8);
         let chunk = ROWS_PER_TASK * c;
-        let done = gemm::on_threads(parallel, ys, chunk, |t, y| {
+        let done = pool::on_threads(parallel, ys, chunk, |t, y| {
             self.rows(&xs[t * chunk..][..y.len()], y, &*sum, rms)
         });
         ensure!(done, "LayerNorm: tract's sum kernel failed");

@@ -12,9 +12,10 @@
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
-use super::epilogue::Epilogue;
+use super::finish::Epilogue;
 use super::gemm::{self, MR, PackedB};
-use super::rewrite::{const_operand, only_successor, replace_with_op};
+use super::graph_match::{const_operand, only_successor, replace_with_op};
+use super::pool;
 
 /// Tokens (rows of the product) from which a linear layer runs natively.
 pub const MIN_ROWS: usize = 8;
@@ -111,7 +112,7 @@ impl EvalOp for PackedLinear {
         };
         let n = self.n;
         let done = gemm::pack::with_scratch(gemm::panels(m, MR) * MR * k, |a| {
-            gemm::on_threads(gemm::worth_threads(m * k * n), a, MR * k, |i, panel| {
+            pool::on_threads(pool::worth_threads(m * k * n), a, MR * k, |i, panel| {
                 gemm::pack::pack_a_panel(xs, m, k, k, i, panel);
                 true
             });

@@ -29,7 +29,8 @@ use tract_nnef::tract_core::ops::nn::DataFormat;
 
 use super::conv_unfold::{Unfold, with_batch};
 use super::gemm;
-use super::rewrite::replace_with_op;
+use super::graph_match::replace_with_op;
+use super::pool;
 
 /// A 2-D max pooling of `[1, C, H, W]` or `[C, H, W]` f32 (see the module doc).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -135,10 +136,10 @@ impl EvalOp for MaxPool2d {
             return Ok(tvec!(out.into_tvalue()));
         }
         // Channels a task: eight tasks in all, split over the pool when worth its dispatch.
-        let parallel = gemm::worth_threads(c * h * w * self.window.kernel[0]);
+        let parallel = pool::worth_threads(c * h * w * self.window.kernel[0]);
         let per_task = c.div_ceil(8).max(1);
         let (span, plane_out) = (self.span(), oh * ow);
-        let done = gemm::on_threads(parallel, ys, per_task * plane_out, |t, outs| {
+        let done = pool::on_threads(parallel, ys, per_task * plane_out, |t, outs| {
             gemm::pack::with_scratch(h * ow + span, |scratch| {
                 let (rows, full) = scratch.split_at_mut(h * ow);
                 for (i, o) in outs.chunks_exact_mut(plane_out).enumerate() {

@@ -29,10 +29,10 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::Downsample;
 
 use super::conv_unfold::{MIN_OUTPUT_CHANNELS, Unfold, UnfoldConv};
-use super::epilogue::Epilogue;
+use super::finish::Epilogue;
 use super::gemm::{self, NR, PackedA};
+use super::graph_match::replace_with_op;
 use super::linear::{ConstProduct, bias_after, const_product};
-use super::rewrite::replace_with_op;
 
 /// Pixels (columns of the product) from which a 1x1 convolution runs natively: one B panel.
 pub const MIN_PIXELS: usize = NR;

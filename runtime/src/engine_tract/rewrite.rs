@@ -5,21 +5,22 @@
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
 //! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), the tanh GELUs ([`gelu`]), the
-//! LayerNorms ([`layer_norm`]), on the AVX-512 kernel tier the convolutions of 8 channels or
-//! more ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of
+//! LayerNorms ([`layer_norm`]), where a native product tier runs (AVX-512F by default:
+//! [`gemm::tier`]) the convolutions of 8 channels or more ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of
 //! channel-first maps ([`pointwise`]) on the native product ([`gemm`]), the ReLU and ResNet
-//! shortcut `Add` after those convolutions taken into them ([`epilogue`]), and (on the other
-//! tiers) the wide image stems, planned with im2col where tract would run them direct spatial
+//! shortcut `Add` after those convolutions taken into them ([`epilogue`]), and (without a native
+//! tier) the wide image stems, planned with im2col where tract would run them direct spatial
 //! ([`conv_direct`]). Then tract's optimiser. On the optimised plan last: the
 //! outlets that depend on the weights alone, computed once ([`fold`]), and the binary ops
 //! optimisation left on tract's generic path ([`broadcast`], after the fold so that no folded op
 //! is rewritten for nothing), and the constants re-laid with natural strides
 //! ([`natural_consts`]). Every rewrite computes its graph's values bit for bit (each module's
 //! tests) but on the stems tract would run direct spatial: [`conv_direct`], and [`conv_unfold`]
-//! on the AVX-512 tier, sum the same products in tract's im2col order instead.
+//! on a native tier, sum the same products in tract's im2col order instead. The matching
+//! helpers the passes share are in [`super::graph_match`]: this driver imports the passes, the
+//! passes never import it (their tests do, to stop before them).
 
 use tract_nnef::prelude::*;
-use tract_nnef::tract_core::ops::binary::TypedBinOp;
 
 use crate::engine_tract::{
     attention, batched, bilinear, broadcast, contraction, conv_direct, conv_unfold, epilogue, fold,
@@ -46,22 +47,22 @@ pub struct Rewrites {
     /// LayerNorm chains run as [`layer_norm::LayerNorm`] (every tier).
     pub layer_norms: usize,
     /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
-    /// product ([`conv_unfold::unfold_convs`]; on the AVX-512 tier only).
+    /// product ([`conv_unfold::unfold_convs`]; on a native product tier only).
     pub unfolded_convs: usize,
-    /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on the
-    /// AVX-512 tier only).
+    /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on a
+    /// native product tier only).
     pub native_linears: usize,
     /// 1x1 convolutions of channel-first maps run as [`pointwise::PointwiseConv`]
-    /// ([`pointwise::native_pointwise_convs`]; on the AVX-512 tier only).
+    /// ([`pointwise::native_pointwise_convs`]; on a native product tier only).
     pub pointwise_convs: usize,
     /// Native convolutions that took the shortcut `Add` and/or the `ReLU` after them
-    /// ([`epilogue::fuse_epilogues`]; on the AVX-512 tier only).
+    /// ([`epilogue::fuse_epilogues`]; on a native product tier only).
     pub epilogues: usize,
     /// Products of two activations (attention) run as [`batched::BatchedProduct`]
-    /// ([`batched::native_batched`]; on the AVX-512 tier only).
+    /// ([`batched::native_batched`]; on a native product tier only).
     pub native_batched: usize,
     /// `scores -> softmax -> values` chains run as [`attention::FusedAttention`]
-    /// ([`attention::fuse_attention`]; on the AVX-512 tier only).
+    /// ([`attention::fuse_attention`]; on a native product tier only).
     pub fused_attentions: usize,
     /// Convolutions tract would run direct spatial planned with im2col and its matmul instead
     /// ([`conv_direct::im2col_wide_stems`]: the image stems of 64 channels or more).
@@ -71,75 +72,6 @@ pub struct Rewrites {
     /// `Add`, `Sub` and `Mul` left on tract's generic path, run as
     /// [`broadcast::BroadcastBinary`].
     pub broadcast_binaries: usize,
-}
-
-/// Wire `op` (named `name`) on `inputs` of `model` in place of outlet 0 of node `replaced`: the
-/// one patch every rewrite into a single native op applies.
-///
-/// # Errors
-/// tract refusing the patch (an inconsistent model).
-pub(crate) fn replace_with_op(
-    model: &mut TypedModel,
-    inputs: &[OutletId],
-    replaced: usize,
-    name: String,
-    op: impl Into<Box<dyn TypedOp>>,
-) -> TractResult<()> {
-    let mut patch = TypedModelPatch::default();
-    let taps: TVec<OutletId> = inputs
-        .iter()
-        .map(|&o| patch.tap_model(model, o))
-        .collect::<TractResult<_>>()?;
-    let y = patch.wire_node(name, op, &taps)?[0];
-    patch.shunt_outside(model, OutletId::new(replaced, 0), y)?;
-    patch.apply(model)
-}
-
-/// The one consumer of outlet 0 of node `id`, if it has exactly one and is not a model output:
-/// the test every fused chain makes of its inner nodes.
-///
-/// # Errors
-/// tract failing to list the model's outputs.
-pub(crate) fn only_successor(model: &TypedModel, id: usize) -> TractResult<Option<usize>> {
-    let outlet = &model.node(id).outputs[0];
-    if outlet.successors.len() != 1 || model.output_outlets()?.contains(&OutletId::new(id, 0)) {
-        return Ok(None);
-    }
-    Ok(Some(outlet.successors[0].node))
-}
-
-/// Node `id`'s two inputs if it is the binary op `name` (`Add`, `Mul`, `Sub`) without a
-/// quantised output.
-pub(crate) fn bin_inputs(model: &TypedModel, id: usize, name: &str) -> Option<[OutletId; 2]> {
-    let node = model.node(id);
-    let is = node
-        .op_as::<TypedBinOp>()
-        .is_some_and(|b| b.0.name() == name && b.1.is_none());
-    (is && node.inputs.len() == 2).then(|| [node.inputs[0], node.inputs[1]])
-}
-
-/// If node `id` is the binary op `name` ([`bin_inputs`]) with exactly one constant operand: the
-/// other operand and the constant (a bias, a scale, a GELU or LayerNorm factor).
-///
-/// # Errors
-/// tract failing to give an operand's fact.
-pub(crate) fn const_operand(
-    model: &TypedModel,
-    id: usize,
-    name: &str,
-) -> TractResult<Option<(OutletId, Arc<Tensor>)>> {
-    let Some([i0, i1]) = bin_inputs(model, id, name) else {
-        return Ok(None);
-    };
-    let (k0, k1) = (
-        model.outlet_fact(i0)?.konst.clone(),
-        model.outlet_fact(i1)?.konst.clone(),
-    );
-    Ok(match (k0, k1) {
-        (None, Some(k)) => Some((i0, k)),
-        (Some(k), None) => Some((i1, k)),
-        _ => None,
-    })
 }
 
 /// The rewrites in the order [`optimise`] runs them (tract's optimiser between `Im2colStems`

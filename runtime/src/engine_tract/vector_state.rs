@@ -9,7 +9,7 @@
 //! Intel Xeon with AVX-512): gathering the patches of one 256-channel convolution took 4.9 ms
 //! right after a GELU and 0.34 ms after a `vzeroupper`. The engine evaluates each node through
 //! [`eval_node`], which clears the bits after the op; the pool's tasks clear them first
-//! (`gemm::on_threads`, `gemm::on_pool`). Clearing changes no value: the upper bits are dead
+//! (`pool::on_threads`, `pool::on_pool`). Clearing changes no value: the upper bits are dead
 //! across these calls (the ABI's vector registers are all caller-saved).
 
 use tract_nnef::internal::*;
