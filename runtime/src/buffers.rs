@@ -1,12 +1,62 @@
 //! Where the runtime's fixed buffers live: a [`Slab`] is either reserved on the heap once at
-//! init (a failed reservation is an [`InitError`], never an abort) or placed by the integrator
+//! init (a failed reservation is a [`MemoryError`], never an abort) or placed by the integrator
 //! (a `'static` region of `memory_layout.toml`, see [`crate::placement`]). Either way its length
-//! never changes after init.
+//! never changes after init. [`MemoryError`] is also what the region checks
+//! ([`crate::regions`], [`crate::placement`]) return: the runtime's one memory failure.
 
 use alloc::vec::Vec;
+use core::fmt;
 use core::ops::{Deref, DerefMut};
 
-use crate::error::InitError;
+/// Why a buffer of the runtime has no memory: a region too small or misaligned, or a
+/// reservation refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum MemoryError {
+    /// The model needs more bytes in a region than `memory_layout.toml` gives it.
+    RegionTooSmall {
+        /// Region name, as in `memory_layout.toml`.
+        region: &'static str,
+        /// Bytes the model's dimensions need.
+        needed_bytes: usize,
+        /// Capacity of the region, bytes.
+        capacity_bytes: usize,
+    },
+    /// A caller-placed region does not start on the alignment the runtime needs.
+    RegionMisaligned {
+        /// Region name, as in `memory_layout.toml`.
+        region: &'static str,
+        /// Required alignment, bytes.
+        align: usize,
+    },
+    /// A fixed buffer could not be reserved.
+    OutOfMemory {
+        /// Bytes requested.
+        bytes: usize,
+    },
+}
+
+impl fmt::Display for MemoryError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::RegionTooSmall {
+                region,
+                needed_bytes,
+                capacity_bytes,
+            } => write!(
+                f,
+                "region `{region}` does not fit: the model needs {needed_bytes} bytes, \
+                 memory_layout.toml gives {capacity_bytes}"
+            ),
+            Self::RegionMisaligned { region, align } => {
+                write!(f, "region `{region}` must start on a {align}-byte boundary")
+            }
+            Self::OutOfMemory { bytes } => write!(f, "cannot reserve a buffer of {bytes} bytes"),
+        }
+    }
+}
+
+impl core::error::Error for MemoryError {}
 
 /// A fixed-length buffer the runtime owns for its whole life.
 #[derive(Debug)]
@@ -18,8 +68,8 @@ pub(crate) enum Slab<T: 'static> {
 }
 
 impl<T: Copy + Default + 'static> Slab<T> {
-    /// `len` copies of `T::default()` on the heap, or [`InitError::OutOfMemory`].
-    pub(crate) fn zeroed(len: usize) -> Result<Self, InitError> {
+    /// `len` copies of `T::default()` on the heap, or [`MemoryError::OutOfMemory`].
+    pub(crate) fn zeroed(len: usize) -> Result<Self, MemoryError> {
         zeroed(len).map(Self::Heap)
     }
 
@@ -49,11 +99,11 @@ impl<T: 'static> DerefMut for Slab<T> {
     }
 }
 
-/// A vector of `len` copies of `T::default()`, or [`InitError::OutOfMemory`].
-pub(crate) fn zeroed<T: Copy + Default>(len: usize) -> Result<Vec<T>, InitError> {
+/// A vector of `len` copies of `T::default()`, or [`MemoryError::OutOfMemory`].
+pub(crate) fn zeroed<T: Copy + Default>(len: usize) -> Result<Vec<T>, MemoryError> {
     let mut v = Vec::new();
     v.try_reserve_exact(len)
-        .map_err(|_| InitError::OutOfMemory {
+        .map_err(|_| MemoryError::OutOfMemory {
             bytes: len.saturating_mul(size_of::<T>()),
         })?;
     v.resize(len, T::default());

@@ -18,7 +18,6 @@ pub mod decode;
 pub mod engine;
 #[cfg(feature = "tract")]
 pub mod engine_tract;
-pub mod error;
 pub mod frame;
 pub mod geo;
 pub mod gkt;
@@ -34,18 +33,20 @@ pub mod satellite;
 pub mod step;
 #[cfg(test)]
 mod test_support;
+#[cfg(feature = "onnx")]
+pub mod translate;
 
 // Crates whose types appear in the public API (`MapFrame` points, `MapFrame::elements`).
 pub use glam;
 pub use heapless;
 
+pub use buffers::MemoryError;
 pub use calibration::Calibration;
 pub use engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
-pub use error::{InitError, StepError};
-pub use frame::{CameraImage, CameraMask, CameraState, Frame};
+pub use frame::{CameraImage, CameraMask, CameraState, Frame, FrameError};
 pub use map_frame::{Health, MapClass, MapElement, MapFrame, SatellitePrior};
-pub use model_dims::ModelDims;
+pub use model_dims::{DimsError, ModelDims};
 pub use placement::RuntimeRegions;
 pub use pose::{EgoMotion, EgoPose};
 pub use satellite::{Coverage, CropSpec, SatelliteSource};
-pub use step::{SatMap, SliceDone, StepSlice};
+pub use step::{InitError, SatMap, SliceDone, StepError, StepSlice};

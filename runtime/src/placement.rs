@@ -6,11 +6,11 @@
 //! Contract: every region is at least its `memory_layout.toml` size and starts on a
 //! [`REGION_ALIGN`]-byte boundary; the runtime keeps the `'static` borrow for its whole life and
 //! zeroes what it uses at init. A region that is too small or misaligned is refused by name
-//! ([`InitError::RegionTooSmall`], [`InitError::RegionMisaligned`]).
+//! ([`MemoryError::RegionTooSmall`], [`MemoryError::RegionMisaligned`]).
 
+use crate::buffers::MemoryError;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::layout;
-use crate::error::InitError;
 use crate::gkt::Lut;
 use crate::model_dims::ModelDims;
 
@@ -85,7 +85,7 @@ pub(crate) struct LutRegions {
 impl RuntimeRegions {
     /// Check every region (size against the layout, alignment) and cut the model's buffers
     /// from them. `dims` must already fit the layout (`regions::check_regions`).
-    pub(crate) fn split(self, dims: &ModelDims) -> Result<(StepRegions, LutRegions), InitError> {
+    pub(crate) fn split(self, dims: &ModelDims) -> Result<(StepRegions, LutRegions), MemoryError> {
         let Self {
             value_features,
             gkt_lut,
@@ -135,16 +135,16 @@ impl RuntimeRegions {
 }
 
 /// `region` after the size and alignment checks.
-fn checked(spec: RegionSpec, region: &'static mut [u8]) -> Result<&'static mut [u8], InitError> {
+fn checked(spec: RegionSpec, region: &'static mut [u8]) -> Result<&'static mut [u8], MemoryError> {
     if region.len() < spec.bytes {
-        return Err(InitError::RegionTooSmall {
+        return Err(MemoryError::RegionTooSmall {
             region: spec.name,
             needed_bytes: spec.bytes,
             capacity_bytes: region.len(),
         });
     }
     if region.as_ptr().align_offset(REGION_ALIGN) != 0 {
-        return Err(InitError::RegionMisaligned {
+        return Err(MemoryError::RegionMisaligned {
             region: spec.name,
             align: REGION_ALIGN,
         });
@@ -156,16 +156,18 @@ fn f32s(
     spec: RegionSpec,
     region: &'static mut [u8],
     len: usize,
-) -> Result<&'static mut [f32], InitError> {
+) -> Result<&'static mut [f32], MemoryError> {
     let region = checked(spec, region)?;
-    bytemuck::try_cast_slice_mut(&mut region[..len * 4]).map_err(|_| InitError::RegionMisaligned {
-        region: spec.name,
-        align: REGION_ALIGN,
+    bytemuck::try_cast_slice_mut(&mut region[..len * 4]).map_err(|_| {
+        MemoryError::RegionMisaligned {
+            region: spec.name,
+            align: REGION_ALIGN,
+        }
     })
 }
 
-fn u16s(spec: RegionSpec, bytes: &'static mut [u8]) -> Result<&'static mut [u16], InitError> {
-    bytemuck::try_cast_slice_mut(bytes).map_err(|_| InitError::RegionMisaligned {
+fn u16s(spec: RegionSpec, bytes: &'static mut [u8]) -> Result<&'static mut [u16], MemoryError> {
+    bytemuck::try_cast_slice_mut(bytes).map_err(|_| MemoryError::RegionMisaligned {
         region: spec.name,
         align: REGION_ALIGN,
     })

@@ -6,6 +6,8 @@
 //! lies at `position + x_e * right + y_e * forward` with `forward = (cos yaw, sin yaw)` and
 //! `right = (sin yaw, -cos yaw)`.
 
+use core::fmt;
+
 use glam::{DVec2, Vec3};
 
 /// Vehicle pose in the route frame.
@@ -61,5 +63,37 @@ impl EgoMotion {
         self.acceleration_mps2.is_finite()
             && self.rotation_rate_radps.is_finite()
             && self.velocity_mps.is_finite()
+    }
+}
+
+/// An axis of a pose or motion vector, for error context.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Axis {
+    /// x (route frame: east; ego frame: right).
+    X,
+    /// y (route frame: north; ego frame: forward).
+    Y,
+    /// z (ego frame: up).
+    Z,
+}
+
+impl Axis {
+    /// The three axes, in vector component order.
+    pub const ALL: [Self; 3] = [Self::X, Self::Y, Self::Z];
+
+    /// `"x"`, `"y"` or `"z"`.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::X => "x",
+            Self::Y => "y",
+            Self::Z => "z",
+        }
+    }
+}
+
+impl fmt::Display for Axis {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
     }
 }

@@ -3,8 +3,8 @@
 //! them: the one check between the generated capacities (a leaf, [`crate::capacity`]) and the
 //! types that size buffers from them.
 
+use crate::buffers::MemoryError;
 use crate::capacity::{MAX_CAMERAS, layout};
-use crate::error::InitError;
 use crate::model_dims::ModelDims;
 
 // The tile cache region of the layout must describe the route-pack cache that exists.
@@ -72,9 +72,9 @@ fn built_in_capacity(region: &str) -> Option<usize> {
 /// this build was generated from (`memory_layout.toml`, or the build's `SATMAP_LAYOUT` file).
 ///
 /// # Errors
-/// [`InitError::RegionTooSmall`] naming the first region that overflows, with the
+/// [`MemoryError::RegionTooSmall`] naming the first region that overflows, with the
 /// bytes the model needs and the region's capacity.
-pub fn check_regions(dims: &ModelDims) -> Result<(), InitError> {
+pub fn check_regions(dims: &ModelDims) -> Result<(), MemoryError> {
     check_regions_with(dims, built_in_capacity)
 }
 
@@ -82,15 +82,15 @@ pub fn check_regions(dims: &ModelDims) -> Result<(), InitError> {
 /// `capacity(region)` gives a region's bytes, `None` (a region the layout lacks) counts as 0.
 ///
 /// # Errors
-/// [`InitError::RegionTooSmall`] naming the first region that overflows.
+/// [`MemoryError::RegionTooSmall`] naming the first region that overflows.
 pub fn check_regions_with(
     dims: &ModelDims,
     capacity: impl Fn(&str) -> Option<usize>,
-) -> Result<(), InitError> {
+) -> Result<(), MemoryError> {
     for (region, needed_bytes) in region_needs(dims) {
         let capacity_bytes = capacity(region).unwrap_or(0);
         if needed_bytes > capacity_bytes {
-            return Err(InitError::RegionTooSmall {
+            return Err(MemoryError::RegionTooSmall {
                 region,
                 needed_bytes,
                 capacity_bytes,
@@ -118,7 +118,7 @@ mod tests {
         dims.image_h = 360;
         assert_eq!(
             check_regions(&dims),
-            Err(InitError::RegionTooSmall {
+            Err(MemoryError::RegionTooSmall {
                 region: "camera_images",
                 needed_bytes: 6 * 640 * 360 * 3,
                 capacity_bytes: layout::CAMERA_IMAGES_BYTES,
@@ -128,7 +128,7 @@ mod tests {
         dims.embed_dims = 512;
         assert!(matches!(
             check_regions(&dims),
-            Err(InitError::RegionTooSmall {
+            Err(MemoryError::RegionTooSmall {
                 region: "value_features",
                 needed_bytes: 737_280,
                 ..

@@ -15,7 +15,7 @@ use satmap_ecu_tests::scenario::{STEPS, Step, SwitchCrop, frame, rust_run, sets,
 use satmap_runtime::frame::FrameLimits;
 use satmap_runtime::map_frame::wire;
 use satmap_runtime::placement::{REGION_ALIGN, REGIONS};
-use satmap_runtime::{Frame, InitError, RuntimeRegions, SatMap};
+use satmap_runtime::{Frame, InitError, MemoryError, RuntimeRegions, SatMap};
 
 /// `len` zeroed bytes at a `REGION_ALIGN` boundary, leaked (the test stands in for a linker
 /// script's static sections).
@@ -69,11 +69,11 @@ fn placed_regions_step_like_the_heap_and_a_short_or_misaligned_region_is_named()
         .err();
         assert_eq!(
             e,
-            Some(InitError::RegionTooSmall {
+            Some(InitError::Memory(MemoryError::RegionTooSmall {
                 region: spec.name,
                 needed_bytes: spec.bytes,
                 capacity_bytes: spec.bytes - 1,
-            }),
+            })),
             "region {} one byte short",
             spec.name
         );
@@ -91,10 +91,10 @@ fn placed_regions_step_like_the_heap_and_a_short_or_misaligned_region_is_named()
             r
         )
         .err(),
-        Some(InitError::RegionMisaligned {
+        Some(InitError::Memory(MemoryError::RegionMisaligned {
             region: "bev_query",
             align: REGION_ALIGN
-        })
+        }))
     );
 }
 

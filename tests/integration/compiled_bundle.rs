@@ -1,4 +1,4 @@
-//! The compiled bundle (`satmap-sim compile`, `bundle::compile`): the committed `test` folder
+//! The compiled bundle (`satmap-sim compile`, `translate`): the committed `test` folder
 //! bundle compiled to one NNEF archive steps bit-identically to the ONNX folder and within the
 //! goldens' tolerance; the committed `test.satmap` is current; a flipped byte, a graph whose
 //! inputs are swapped and a layout too small are refused; the ECU build of the runtime carries
@@ -13,15 +13,15 @@ use std::sync::OnceLock;
 use crate::common::{bundle_dir, max_abs_diff};
 use satmap_ecu_tests::golden::compiled_path;
 use satmap_layout::MemoryLayout;
-use satmap_runtime::InitError;
+use satmap_runtime::MemoryError;
 use satmap_runtime::bundle::archive::write_archive;
-use satmap_runtime::bundle::compile::{CompileError, compile, stage_entry_name};
 use satmap_runtime::bundle::{
     Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Sha256Digest, Trust,
 };
 use satmap_runtime::capacity::layout;
 use satmap_runtime::engine::Stage;
 use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::translate::{CompileError, compile, stage_entry_name};
 
 /// The parity bound of `golden_step.rs`, against the onnxruntime reference.
 const STAGE_TOL: f32 = 1e-4;
@@ -332,7 +332,7 @@ fn a_layout_too_small_is_refused_before_translation() {
         }
     };
     match compile(&source, Precision::F32, short) {
-        Err(CompileError::Layout(InitError::RegionTooSmall { region, .. })) => {
+        Err(CompileError::Layout(MemoryError::RegionTooSmall { region, .. })) => {
             assert_eq!(region, "points");
         }
         other => panic!("{other:?}"),

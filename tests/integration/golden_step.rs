@@ -8,7 +8,7 @@ use crate::common::{GoldenFrame, calibration, engine};
 use satmap_ecu_tests::parity::{degraded_frame_matches, golden_frames_match};
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::satellite::FixedCrop;
-use satmap_runtime::{SatMap, StepError};
+use satmap_runtime::{FrameError, SatMap, StepError};
 
 fn dims_wh(map: &SatMap<TractEngine, impl satmap_runtime::SatelliteSource>) -> (u32, u32) {
     let d = map.dims();
@@ -56,32 +56,35 @@ fn bad_inputs_return_errors_and_the_next_good_frame_steps() {
     case(&|b, s| b.sequence = s, &|e, s| {
         assert_eq!(
             e,
-            StepError::SequenceNotIncreasing {
+            StepError::Frame(FrameError::SequenceNotIncreasing {
                 previous: s,
                 got: s
-            }
+            })
         )
     });
     case(&|b, _| b.timestamp_us = 0, &|e, s| {
         assert_eq!(
             e,
-            StepError::TimestampNotIncreasing {
+            StepError::Frame(FrameError::TimestampNotIncreasing {
                 previous_us: 1_000_000 + s * 100_000,
                 got_us: 0
-            }
+            })
         )
     });
     case(&|b, _| b.pose.yaw_rad = f64::NAN, &|e, _| {
-        assert_eq!(e, StepError::NonFinitePose)
+        assert_eq!(e, StepError::Frame(FrameError::NonFinitePose))
     });
     case(&|b, _| b.pose.position_m.x = f64::INFINITY, &|e, _| {
-        assert_eq!(e, StepError::NonFinitePose)
+        assert_eq!(e, StepError::Frame(FrameError::NonFinitePose))
     });
     case(&|b, _| b.motion.velocity_mps.y = f32::INFINITY, &|e, _| {
-        assert_eq!(e, StepError::NonFiniteMotion)
+        assert_eq!(e, StepError::Frame(FrameError::NonFiniteMotion))
     });
     case(&|b, _| b.images = [None; 6], &|e, _| {
-        assert!(matches!(e, StepError::NoCameraLeft { .. }))
+        assert!(matches!(
+            e,
+            StepError::Frame(FrameError::NoCameraLeft { .. })
+        ))
     });
     case(
         &|b, _| {
@@ -93,11 +96,11 @@ fn bad_inputs_return_errors_and_the_next_good_frame_steps() {
             assert!(
                 matches!(
                     e,
-                    StepError::WrongImageSize {
+                    StepError::Frame(FrameError::WrongImageSize {
                         camera: 5,
                         got_width_px: 160,
                         ..
-                    }
+                    })
                 ),
                 "{e:?}"
             )
@@ -111,7 +114,10 @@ fn bad_inputs_return_errors_and_the_next_good_frame_steps() {
         },
         &|e, _| {
             assert!(
-                matches!(e, StepError::WrongImageLength { camera: 2, .. }),
+                matches!(
+                    e,
+                    StepError::Frame(FrameError::WrongImageLength { camera: 2, .. })
+                ),
                 "{e:?}"
             )
         },

@@ -9,8 +9,8 @@
 use std::path::{Path, PathBuf};
 
 use satmap_layout::MemoryLayout;
+use satmap_runtime::MemoryError;
 use satmap_runtime::capacity::layout;
-use satmap_runtime::error::InitError;
 use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::regions::{MODEL_REGIONS, check_regions, check_regions_with, region_needs};
 
@@ -33,7 +33,7 @@ fn parse(path: &Path) -> MemoryLayout {
     MemoryLayout::parse(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-fn fits(dims: &ModelDims, map: &MemoryLayout) -> Result<(), InitError> {
+fn fits(dims: &ModelDims, map: &MemoryLayout) -> Result<(), MemoryError> {
     check_regions_with(dims, |name| map.region(name).map(|r| r.bytes))
 }
 
@@ -100,7 +100,7 @@ fn paper_layout_is_sized_for_the_paper_dims() {
     nano.num_vec = 100;
     assert!(matches!(
         fits(&nano, &paper),
-        Err(InitError::RegionTooSmall {
+        Err(MemoryError::RegionTooSmall {
             region: "class_logits",
             needed_bytes: 1200,
             capacity_bytes: 600
@@ -113,7 +113,7 @@ fn default_layout_refuses_the_paper_dims_by_region() {
     let default = parse(&root().join("memory_layout.toml"));
     assert_eq!(
         fits(&ModelDims::paper_config(), &default),
-        Err(InitError::RegionTooSmall {
+        Err(MemoryError::RegionTooSmall {
             region: "camera_images",
             needed_bytes: 6 * 450 * 800 * 3,
             capacity_bytes: 6 * 180 * 320 * 3,

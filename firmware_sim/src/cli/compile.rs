@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use satmap_runtime::bundle::compile::compile;
 use satmap_runtime::bundle::{Bundle, Precision};
 use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::translate::compile;
 
 use crate::cli::memory_map::{built_in_layout_line, read_layout};
 

@@ -178,7 +178,7 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
             .is_some()
         // A source bundle that cannot be compiled (refused, already compiled, too large for
         // the layout, a precision it cannot take).
-        || e.downcast_ref::<satmap_runtime::bundle::compile::CompileError>()
+        || e.downcast_ref::<satmap_runtime::translate::CompileError>()
             .is_some()
         || e.downcast_ref::<satmap_runtime::calibration::CalibrationFileError>()
             .is_some()

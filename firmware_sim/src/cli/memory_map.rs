@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use satmap_layout::MemoryLayout;
-use satmap_runtime::InitError;
+use satmap_runtime::MemoryError;
 use satmap_runtime::bundle::Bundle;
 use satmap_runtime::capacity::layout;
 use satmap_runtime::regions::check_regions_with;
@@ -85,7 +85,7 @@ pub fn run(args: &Args) -> Result<()> {
                     .with_context(|| format!("bundle {}", dir.display()));
             }
             (
-                Err(InitError::RegionTooSmall {
+                Err(MemoryError::RegionTooSmall {
                     region,
                     needed_bytes,
                     capacity_bytes,

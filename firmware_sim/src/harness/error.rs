@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use satmap_runtime::engine::EngineError;
-use satmap_runtime::error::{InitError, StepError};
+use satmap_runtime::{InitError, MemoryError, StepError};
 
 /// Process exit code: the replay ran but a budget was exceeded.
 pub const EXIT_BUDGET_EXCEEDED: u8 = 4;
@@ -86,7 +86,16 @@ pub enum HarnessError {
 impl From<InitError> for HarnessError {
     fn from(e: InitError) -> Self {
         match e {
-            InitError::RegionTooSmall {
+            InitError::Memory(e @ MemoryError::RegionTooSmall { .. }) => Self::from(e),
+            e => Self::Init(e),
+        }
+    }
+}
+
+impl From<MemoryError> for HarnessError {
+    fn from(e: MemoryError) -> Self {
+        match e {
+            MemoryError::RegionTooSmall {
                 region,
                 needed_bytes,
                 capacity_bytes,
@@ -95,7 +104,7 @@ impl From<InitError> for HarnessError {
                 needed_bytes,
                 capacity_bytes,
             },
-            e => Self::Init(e),
+            e => Self::Init(InitError::Memory(e)),
         }
     }
 }

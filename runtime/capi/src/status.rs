@@ -2,7 +2,7 @@
 
 use satmap_runtime::bundle::BundleError;
 use satmap_runtime::map_frame::wire::WireError;
-use satmap_runtime::{InitError, StepError};
+use satmap_runtime::{FrameError, InitError, MemoryError, StepError};
 
 /// Result of every C API call; 0 is success.
 #[repr(C)]
@@ -85,10 +85,10 @@ impl From<&BundleError> for SatmapStatus {
 impl From<&InitError> for SatmapStatus {
     fn from(e: &InitError) -> Self {
         match e {
-            InitError::RegionMisaligned { .. } => Self::RegionMisaligned,
+            InitError::Memory(MemoryError::RegionMisaligned { .. }) => Self::RegionMisaligned,
             InitError::InvalidCalibration { .. } => Self::Calibration,
             // Too small for the layout (caller region) or the model (layout capacity).
-            InitError::RegionTooSmall { .. } => Self::RegionTooSmall,
+            InitError::Memory(MemoryError::RegionTooSmall { .. }) => Self::RegionTooSmall,
             _ => Self::Init,
         }
     }
@@ -97,7 +97,7 @@ impl From<&InitError> for SatmapStatus {
 impl From<&StepError> for SatmapStatus {
     fn from(e: &StepError) -> Self {
         match e {
-            StepError::NoCameraLeft { .. } => Self::NoCameraLeft,
+            StepError::Frame(FrameError::NoCameraLeft { .. }) => Self::NoCameraLeft,
             StepError::StepInProgress { .. } => Self::StepInProgress,
             StepError::NoStepInProgress => Self::NoStepInProgress,
             StepError::StepIncomplete { .. } => Self::StepIncomplete,

@@ -6,7 +6,7 @@ use alloc::vec::Vec;
 use safetensors::{Dtype, SafeTensors};
 use satmap_runtime::can_bus::can_bus;
 use satmap_runtime::decode::decode;
-use satmap_runtime::frame::{FrameLimits, check_frame};
+use satmap_runtime::frame::{FrameError, FrameLimits, check_frame};
 use satmap_runtime::geo::Geodetic;
 use satmap_runtime::gkt::{Lut, gather_sum};
 use satmap_runtime::glam::{DVec2, Vec3};
@@ -14,9 +14,7 @@ use satmap_runtime::map_frame::{MapElement, MapFrame, digest, wire};
 use satmap_runtime::route_pack::{
     PackHeader, PackSource, PackTile, TileCodec, TileKey, decode_tile, encode_pack,
 };
-use satmap_runtime::{
-    CameraImage, CameraMask, CropSpec, EgoMotion, EgoPose, Frame, ModelDims, StepError,
-};
+use satmap_runtime::{CameraImage, CameraMask, CropSpec, EgoMotion, EgoPose, Frame, ModelDims};
 use xxhash_rust::xxh3::Xxh3;
 
 use crate::{CheckFault, CoreDigests, NUSCENES_LIKE};
@@ -193,7 +191,7 @@ pub fn run(golden: &[u8]) -> Result<CoreDigests, CheckFault> {
     h.update(&[used.mask.bits()]);
     h.update(&used.states.map(|s| s as u8));
     frame.pose.yaw_rad = f64::NAN;
-    if check_frame(&frame, &dims, &FrameLimits::DEFAULT, None) != Err(StepError::NonFinitePose) {
+    if check_frame(&frame, &dims, &FrameLimits::DEFAULT, None) != Err(FrameError::NonFinitePose) {
         return Err(CheckFault::FrameChecks);
     }
     let frame_checks_digest = h.digest();

@@ -111,6 +111,7 @@ pub struct Manifest {
     #[serde(default)]
     pub precision: Precision,
     /// Model dimensions and configuration.
+    #[serde(deserialize_with = "super::model_table::deserialize_dims")]
     pub model: ModelDims,
     /// Provenance, in a compiled bundle only.
     #[serde(default)]

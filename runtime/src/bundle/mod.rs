@@ -1,7 +1,7 @@
 //! Bundles, in two forms (std only): a folder with `manifest.toml`, its digest `manifest.sha256`
 //! and one ONNX file per stage (what `satmap_ref.export` writes, run by the host tools), and the
 //! compiled bundle the ECU loads, one archive of the same manifest and one NNEF graph per stage
-//! ([`archive`], written by [`compile`]).
+//! ([`archive`], written by `crate::translate`).
 //!
 //! The manifest (format in `ARCHITECTURE.md`) carries the model dimensions and, per stage, the
 //! file, its SHA-256 and its input/output names, shapes and dtypes. A bundle is one verified
@@ -13,8 +13,6 @@
 //! Anything that does not fit fails here with an error naming the file, stage and tensor.
 
 pub mod archive;
-#[cfg(feature = "onnx")]
-pub mod compile;
 mod digest;
 mod error;
 pub mod graph_check;

@@ -38,6 +38,15 @@ pub struct ModelTable {
     sat_gsd_m: f64,
 }
 
+/// `[model]` as [`ModelDims`]: the table, then its conversion (serde's `deserialize_with` on
+/// the manifest's `model` field; the core's `ModelDims` knows nothing of serde or bundles).
+pub(super) fn deserialize_dims<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<ModelDims, D::Error> {
+    let table = <ModelTable as serde::Deserialize>::deserialize(deserializer)?;
+    ModelDims::try_from(table).map_err(serde::de::Error::custom)
+}
+
 impl TryFrom<ModelTable> for ModelDims {
     type Error = String;
 
@@ -76,5 +85,60 @@ impl TryFrom<ModelTable> for ModelDims {
             sat_w: t.sat_w,
             sat_gsd_m: t.sat_gsd_m,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model_dims::DimsError;
+
+    /// A `[model]` table's text as the manifest's `model` field reads it.
+    fn parse(text: &str) -> Result<ModelDims, toml::de::Error> {
+        #[derive(serde::Deserialize)]
+        struct Holder {
+            #[serde(deserialize_with = "deserialize_dims")]
+            model: ModelDims,
+        }
+        toml::from_str::<Holder>(&format!("[model]\n{text}")).map(|h| h.model)
+    }
+
+    #[test]
+    fn deserialises_the_manifest_model_table() {
+        let text = r#"
+config = "test"
+embed_dims = 32
+bev_h = 80
+bev_w = 40
+pc_range_m = [-15.0, -30.0, -2.0, 15.0, 30.0, 2.0]
+classes = ["divider", "ped_crossing", "boundary"]
+num_vec = 50
+num_pts = 20
+top_k = 50
+cameras = ["CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_FRONT_LEFT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_BACK_RIGHT"]
+image_scale = 0.2
+image_h = 180
+image_w = 320
+pad_h = 192
+pad_w = 320
+feat_h = 6
+feat_w = 10
+gkt_heights_m = [-1.5, -0.5, 0.5, 1.5]
+gkt_kernel = [3, 5]
+sat_h = 200
+sat_w = 100
+sat_gsd_m = 0.3
+"#;
+        let dims = parse(text).unwrap();
+        assert_eq!(dims, ModelDims::test_config());
+        let bad = text.replace("\"boundary\"", "\"kerb\"");
+        assert!(parse(&bad).is_err());
+        // Parsing does not range-check; `validate` (run by `Bundle::open`) does.
+        let bad = text.replace("top_k = 50", "top_k = 60");
+        let parsed = parse(&bad).unwrap();
+        assert_eq!(
+            parsed.validate(),
+            Err(DimsError::TopKTooLarge { top_k: 60, max: 50 })
+        );
     }
 }

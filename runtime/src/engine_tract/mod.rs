@@ -41,8 +41,6 @@ pub mod gelu;
 pub mod gemm;
 mod graph_load;
 mod graph_match;
-#[cfg(test)]
-mod import_graph;
 pub mod kernel_family;
 pub mod layer_norm;
 pub mod linear;

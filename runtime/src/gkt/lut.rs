@@ -16,8 +16,10 @@ use glam::Mat4;
 use crate::buffers::Slab;
 use crate::calibration::{Calibration, NUM_CAMERAS};
 use crate::capacity::NUM_HEADS;
-use crate::error::{InitError, StepError};
 use crate::model_dims::ModelDims;
+
+mod error;
+pub use error::{LutCorrupt, LutError};
 
 /// Depth below which a projected point is behind the camera (and the division guard).
 const MIN_DEPTH: f32 = 1e-5;
@@ -88,9 +90,9 @@ impl Lut {
     /// `dims` must have passed [`ModelDims::validate`].
     ///
     /// # Errors
-    /// [`InitError::InvalidCalibration`] for a bad camera, [`InitError::OutOfMemory`] when the
+    /// [`LutError::InvalidCalibration`] for a bad camera, [`LutError::Memory`] when the
     /// storage cannot be reserved.
-    pub fn new(dims: &ModelDims, calibration: &Calibration) -> Result<Self, InitError> {
+    pub fn new(dims: &ModelDims, calibration: &Calibration) -> Result<Self, LutError> {
         let (queries, indices, count) = Self::storage_lens(dims);
         Self::with_storage(
             dims,
@@ -109,7 +111,7 @@ impl Lut {
         queries: &'static mut [u16],
         indices: &'static mut [u16],
         count: &'static mut [u8],
-    ) -> Result<Self, InitError> {
+    ) -> Result<Self, LutError> {
         Self::with_storage(
             dims,
             calibration,
@@ -125,7 +127,7 @@ impl Lut {
         queries: Slab<u16>,
         indices: Slab<u16>,
         count: Slab<u8>,
-    ) -> Result<Self, InitError> {
+    ) -> Result<Self, LutError> {
         let mut lut = Self {
             dims: dims.clone(),
             lidar2img: [Mat4::ZERO; NUM_CAMERAS],
@@ -162,11 +164,11 @@ impl Lut {
     /// Rebuild the table in place for a new calibration, without allocating.
     ///
     /// # Errors
-    /// [`InitError::InvalidCalibration`]; the table is unchanged in that case.
-    pub fn rebuild(&mut self, calibration: &Calibration) -> Result<(), InitError> {
+    /// [`LutError::InvalidCalibration`]; the table is unchanged in that case.
+    pub fn rebuild(&mut self, calibration: &Calibration) -> Result<(), LutError> {
         calibration
             .validate()
-            .map_err(|(camera, fault)| InitError::InvalidCalibration { camera, fault })?;
+            .map_err(|(camera, fault)| LutError::InvalidCalibration { camera, fault })?;
         let d = &self.dims;
         self.lidar2img = calibration.lidar2img(d.image_scale);
         let entry_len = NUM_HEADS * d.kernel_points();
@@ -233,13 +235,13 @@ impl Lut {
     /// 2-core AMD EPYC with AVX-512), against 172 us for the gather itself; so every step checks.
     ///
     /// # Errors
-    /// [`StepError::LutCorrupt`] when it changed.
-    pub fn verify(&self) -> Result<(), StepError> {
+    /// [`LutCorrupt`] when it changed.
+    pub fn verify(&self) -> Result<(), LutCorrupt> {
         let found = self.digest();
         if found == self.built_digest {
             Ok(())
         } else {
-            Err(StepError::LutCorrupt {
+            Err(LutCorrupt {
                 built: self.built_digest,
                 found,
             })

@@ -9,4 +9,4 @@ pub mod kernel;
 pub mod lut;
 
 pub use kernel::{KernelError, gather_sum};
-pub use lut::{DenseLut, Lut};
+pub use lut::{DenseLut, Lut, LutCorrupt, LutError};

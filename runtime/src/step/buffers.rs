@@ -6,10 +6,10 @@
 //!
 //! [`SatMap::buffers`]: super::SatMap::buffers
 
+use crate::buffers::MemoryError;
 use crate::buffers::Slab;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::CAN_BUS_LEN;
-use crate::error::InitError;
 use crate::model_dims::ModelDims;
 
 /// The pipeline's intermediate tensors of the last attempted step, row-major, sized from the
@@ -39,7 +39,7 @@ pub struct StepBuffers {
 
 impl StepBuffers {
     /// Reserve every buffer for `dims`, zeroed.
-    pub(super) fn new(dims: &ModelDims) -> Result<Self, InitError> {
+    pub(super) fn new(dims: &ModelDims) -> Result<Self, MemoryError> {
         Ok(Self {
             can_bus: [0.0; CAN_BUS_LEN],
             value: Slab::zeroed(NUM_CAMERAS * dims.value_len())?,

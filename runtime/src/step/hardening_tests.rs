@@ -7,7 +7,8 @@ use glam::DVec3;
 
 use super::*;
 use crate::calibration::{CalibrationFault, CalibrationField};
-use crate::frame::Axis;
+use crate::frame::{FrameError, InvalidLimits};
+use crate::pose::Axis;
 use crate::satellite::FixedCrop;
 use crate::test_support::{
     FakeEngine, Images, count_allocations, crop, fake_runtime, nuscenes_like,
@@ -33,11 +34,11 @@ fn sequence_max_is_refused_and_the_next_normal_frame_steps_as_on_a_fresh_runtime
     let first = rt.step(&images.frame(1)).unwrap().clone();
     let mut bad = images.frame(2);
     bad.sequence = u64::MAX;
-    let refused = StepError::SequenceGapTooLarge {
+    let refused = StepError::Frame(FrameError::SequenceGapTooLarge {
         previous: 1,
         got: u64::MAX,
         max_gap: 1000,
-    };
+    });
     // Refused twice: the first refusal did not adopt the sequence.
     assert_eq!(rt.step(&bad).unwrap_err(), refused);
     assert_eq!(rt.step(&bad).unwrap_err(), refused);
@@ -60,11 +61,11 @@ fn timestamp_max_is_refused_and_the_next_normal_frame_steps_as_on_a_fresh_runtim
     let first = rt.step(&images.frame(1)).unwrap().clone();
     let mut bad = images.frame(2);
     bad.timestamp_us = u64::MAX;
-    let refused = StepError::TimestampGapTooLarge {
+    let refused = StepError::Frame(FrameError::TimestampGapTooLarge {
         previous_us: 1_100_000,
         got_us: u64::MAX,
         max_gap_us: 10_000_000,
-    };
+    });
     assert_eq!(rt.step(&bad).unwrap_err(), refused);
     assert_eq!(rt.step(&bad).unwrap_err(), refused);
     assert_eq!(rt.last_map(), Some(&first));
@@ -94,21 +95,21 @@ fn gaps_just_inside_the_limits_are_accepted_and_just_beyond_refused() {
         (
             1 + 1001,
             1_200_000,
-            Some(StepError::SequenceGapTooLarge {
+            Some(StepError::Frame(FrameError::SequenceGapTooLarge {
                 previous: 1,
                 got: 1002,
                 max_gap: 1000,
-            }),
+            })),
         ),
         (2, 1_100_000 + 10_000_000, None),
         (
             2,
             1_100_000 + 10_000_001,
-            Some(StepError::TimestampGapTooLarge {
+            Some(StepError::Frame(FrameError::TimestampGapTooLarge {
                 previous_us: 1_100_000,
                 got_us: 11_100_001,
                 max_gap_us: 10_000_000,
-            }),
+            })),
         ),
     ];
     for (sequence, timestamp_us, refusal) in cases {
@@ -154,21 +155,21 @@ fn configured_gaps_are_the_ones_checked() {
     rt.step(&images.frame(2)).unwrap();
     assert_eq!(
         rt.step(&images.frame(4)).unwrap_err(),
-        StepError::SequenceGapTooLarge {
+        StepError::Frame(FrameError::SequenceGapTooLarge {
             previous: 2,
             got: 4,
             max_gap: 1
-        }
+        })
     );
     let mut late = images.frame(3);
     late.timestamp_us += 1;
     assert_eq!(
         rt.step(&late).unwrap_err(),
-        StepError::TimestampGapTooLarge {
+        StepError::Frame(FrameError::TimestampGapTooLarge {
             previous_us: 1_200_000,
             got_us: 1_300_001,
             max_gap_us: 100_000
-        }
+        })
     );
     assert_eq!(rt.step(&images.frame(3)).unwrap().sequence, 3);
 }
@@ -184,10 +185,10 @@ fn reset_allows_a_restart_from_sequence_zero() {
     // Without a reset a restarted counter is refused, and changes nothing.
     assert_eq!(
         rt.step(&images.frame(0)).unwrap_err(),
-        StepError::SequenceNotIncreasing {
+        StepError::Frame(FrameError::SequenceNotIncreasing {
             previous: 6,
             got: 0
-        }
+        })
     );
     assert_eq!(rt.last_map(), Some(&sixth));
     let ((), allocations) = count_allocations(|| rt.reset());
@@ -224,10 +225,10 @@ fn a_corrupt_first_frame_is_recovered_by_reset() {
     assert_eq!(rt.step(&anchor).unwrap().sequence, u64::MAX);
     assert_eq!(
         rt.step(&images.frame(2)).unwrap_err(),
-        StepError::SequenceNotIncreasing {
+        StepError::Frame(FrameError::SequenceNotIncreasing {
             previous: u64::MAX,
             got: 2
-        }
+        })
     );
     rt.reset();
     rt.step(&images.frame(1)).unwrap();
@@ -251,91 +252,91 @@ fn each_implausible_field_is_refused_then_the_runtime_steps_normally() {
     let cases: [Case; 10] = [
         (
             |f| f.motion.velocity_mps.y = 3e38,
-            StepError::VelocityOutOfRange {
+            StepError::Frame(FrameError::VelocityOutOfRange {
                 axis: Axis::Y,
                 value_mps: 3e38,
                 limit_mps: 100.0,
-            },
+            }),
             "velocity y = 3e38 m/s",
         ),
         (
             |f| f.motion.velocity_mps.x = -100.5,
-            StepError::VelocityOutOfRange {
+            StepError::Frame(FrameError::VelocityOutOfRange {
                 axis: Axis::X,
                 value_mps: -100.5,
                 limit_mps: 100.0,
-            },
+            }),
             "velocity x = -1.005e2 m/s",
         ),
         (
             |f| f.pose.yaw_rad = 1e308,
-            StepError::YawOutOfRange {
+            StepError::Frame(FrameError::YawOutOfRange {
                 value_rad: 1e308,
                 limit_rad: 1e4,
-            },
+            }),
             "yaw = 1e308 rad",
         ),
         (
             |f| f.pose.yaw_rad = -10_000.5,
-            StepError::YawOutOfRange {
+            StepError::Frame(FrameError::YawOutOfRange {
                 value_rad: -10_000.5,
                 limit_rad: 1e4,
-            },
+            }),
             "yaw = -1.00005e4 rad",
         ),
         (
             |f| f.pose.position_m.x = 1e300,
-            StepError::PositionOutOfRange {
+            StepError::Frame(FrameError::PositionOutOfRange {
                 axis: Axis::X,
                 value_m: 1e300,
                 limit_m: 1e7,
-            },
+            }),
             "position x = 1e300 m",
         ),
         (
             |f| f.pose.position_m.y = -1e300,
-            StepError::PositionOutOfRange {
+            StepError::Frame(FrameError::PositionOutOfRange {
                 axis: Axis::Y,
                 value_m: -1e300,
                 limit_m: 1e7,
-            },
+            }),
             "position y = -1e300 m",
         ),
         (
             // Gravity plus a 10 g jolt.
             |f| f.motion.acceleration_mps2.z = 110.0,
-            StepError::AccelerationOutOfRange {
+            StepError::Frame(FrameError::AccelerationOutOfRange {
                 axis: Axis::Z,
                 value_mps2: 110.0,
                 limit_mps2: 100.0,
-            },
+            }),
             "acceleration z = 1.1e2 m/s^2",
         ),
         (
             |f| f.motion.acceleration_mps2.x = -3e38,
-            StepError::AccelerationOutOfRange {
+            StepError::Frame(FrameError::AccelerationOutOfRange {
                 axis: Axis::X,
                 value_mps2: -3e38,
                 limit_mps2: 100.0,
-            },
+            }),
             "acceleration x = -3e38 m/s^2",
         ),
         (
             |f| f.motion.rotation_rate_radps.z = 10.5,
-            StepError::RotationRateOutOfRange {
+            StepError::Frame(FrameError::RotationRateOutOfRange {
                 axis: Axis::Z,
                 value_radps: 10.5,
                 limit_radps: 10.0,
-            },
+            }),
             "rotation rate z = 1.05e1 rad/s",
         ),
         (
             |f| f.motion.rotation_rate_radps.x = -1e30,
-            StepError::RotationRateOutOfRange {
+            StepError::Frame(FrameError::RotationRateOutOfRange {
                 axis: Axis::X,
                 value_radps: -1e30,
                 limit_radps: 10.0,
-            },
+            }),
             "rotation rate x = -1e30 rad/s",
         ),
     ];
@@ -438,7 +439,10 @@ fn limits_are_validated_and_configurable() {
             FixedCrop(&c),
             limits,
         );
-        assert_eq!(r.err(), Some(InitError::InvalidLimits { field }));
+        assert_eq!(
+            r.err(),
+            Some(InitError::InvalidLimits(InvalidLimits { field }))
+        );
     }
     // A tighter bound refuses the test frames' 8.1 m/s; an infinite one lifts the bound.
     let mut slow = SatMap::with_limits(
@@ -453,11 +457,11 @@ fn limits_are_validated_and_configurable() {
     .unwrap();
     assert_eq!(
         slow.step(&images.frame(1)).unwrap_err(),
-        StepError::VelocityOutOfRange {
+        StepError::Frame(FrameError::VelocityOutOfRange {
             axis: Axis::Y,
             value_mps: images.frame(1).motion.velocity_mps.y,
             limit_mps: 5.0
-        }
+        })
     );
     let mut unbounded = SatMap::with_limits(
         FakeEngine::new(dims.clone()),

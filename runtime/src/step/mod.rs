@@ -15,9 +15,11 @@
 //! [`SatMap::reset`] is the explicit restart after which any first frame is accepted again.
 
 mod buffers;
+mod error;
 mod staged;
 
 pub use buffers::StepBuffers;
+pub use error::{InitError, StepError};
 pub use staged::{FramePart, SliceDone, StepSlice};
 use staged::{ImageSeen, Pending, Slices};
 
@@ -26,7 +28,6 @@ use crate::can_bus::can_bus;
 use crate::capacity::CAN_BUS_LEN;
 use crate::decode::decode;
 use crate::engine::Engine;
-use crate::error::{InitError, StepError};
 use crate::frame::{Frame, FrameLimits, LastStep, check_frame};
 use crate::gkt::{Lut, gather_sum};
 use crate::map_frame::{self, Health, MapFrame, SatellitePrior};
@@ -58,9 +59,9 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// every buffer; frames are checked against [`FrameLimits::DEFAULT`].
     ///
     /// # Errors
-    /// [`InitError::Dims`], [`InitError::RegionTooSmall`] (a region of `memory_layout.toml`
-    /// cannot hold the model's buffers), [`InitError::InvalidCalibration`] (see
-    /// [`Calibration::validate`]) or [`InitError::OutOfMemory`].
+    /// [`InitError::Dims`], [`InitError::Memory`] (a region of `memory_layout.toml` cannot
+    /// hold the model's buffers, or a buffer cannot be reserved) or
+    /// [`InitError::InvalidCalibration`] (see [`Calibration::validate`]).
     pub fn new(engine: E, calibration: &Calibration, satellite: S) -> Result<Self, InitError> {
         Self::with_limits(engine, calibration, satellite, FrameLimits::DEFAULT)
     }
@@ -89,7 +90,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// of the step's own state is allocated (the engine keeps its own memory).
     ///
     /// # Errors
-    /// [`InitError::RegionTooSmall`] or [`InitError::RegionMisaligned`] naming the region,
+    /// [`InitError::Memory`] naming the region (too small or misaligned),
     /// else as [`SatMap::with_limits`].
     pub fn in_regions(
         engine: E,
@@ -373,7 +374,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     /// [`InitError::InvalidCalibration`] (see [`Calibration::validate`]); the previous table
     /// stays in use then.
     pub fn recalibrate(&mut self, calibration: &Calibration) -> Result<(), InitError> {
-        self.lut.rebuild(calibration)
+        Ok(self.lut.rebuild(calibration)?)
     }
 
     /// Restart the frame counters: forget the last successful step, so that the next frame is

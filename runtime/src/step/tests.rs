@@ -6,7 +6,7 @@ use alloc::vec::Vec;
 
 use super::*;
 use crate::engine::{BackendFault, EngineError, EngineErrorKind, Stage};
-use crate::frame::CameraImage;
+use crate::frame::{CameraImage, FrameError};
 use crate::pose::EgoPose;
 use crate::satellite::{CropSpec, FixedCrop, NoSatellite};
 use crate::test_support::{FakeEngine, Images, count_allocations, crop, nuscenes_like};
@@ -107,54 +107,54 @@ fn each_bad_input_then_a_good_step() {
             "repeated sequence",
             |f| f.sequence = 1,
             |e| {
-                e == StepError::SequenceNotIncreasing {
+                e == StepError::Frame(FrameError::SequenceNotIncreasing {
                     previous: 1,
                     got: 1,
-                }
+                })
             },
         ),
         (
             "old sequence",
             |f| f.sequence = 0,
             |e| {
-                e == StepError::SequenceNotIncreasing {
+                e == StepError::Frame(FrameError::SequenceNotIncreasing {
                     previous: 1,
                     got: 0,
-                }
+                })
             },
         ),
         (
             "timestamp",
             |f| f.timestamp_us = 1_100_000,
             |e| {
-                e == StepError::TimestampNotIncreasing {
+                e == StepError::Frame(FrameError::TimestampNotIncreasing {
                     previous_us: 1_100_000,
                     got_us: 1_100_000,
-                }
+                })
             },
         ),
         (
             "nan pose",
             |f| f.pose.position_m.x = f64::NAN,
-            |e| e == StepError::NonFinitePose,
+            |e| e == StepError::Frame(FrameError::NonFinitePose),
         ),
         (
             "inf yaw",
             |f| f.pose.yaw_rad = f64::INFINITY,
-            |e| e == StepError::NonFinitePose,
+            |e| e == StepError::Frame(FrameError::NonFinitePose),
         ),
         (
             "nan motion",
             |f| f.motion.velocity_mps.y = f32::NAN,
-            |e| e == StepError::NonFiniteMotion,
+            |e| e == StepError::Frame(FrameError::NonFiniteMotion),
         ),
         (
             "no camera left",
             |f| f.images = [None; 6],
             |e| {
-                e == StepError::NoCameraLeft {
+                e == StepError::Frame(FrameError::NoCameraLeft {
                     states: [crate::frame::CameraState::Missing; 6],
-                }
+                })
             },
         ),
         (
@@ -166,24 +166,24 @@ fn each_bad_input_then_a_good_step() {
                 }
             },
             |e| {
-                e == StepError::WrongImageSize {
+                e == StepError::Frame(FrameError::WrongImageSize {
                     camera: 2,
                     expected_width_px: 320,
                     expected_height_px: 180,
                     got_width_px: 100,
                     got_height_px: 50,
-                }
+                })
             },
         ),
         (
             "wrong length",
             |_| {},
             |e| {
-                e == StepError::WrongImageLength {
+                e == StepError::Frame(FrameError::WrongImageLength {
                     camera: 5,
                     expected_bytes: 172_800,
                     got_bytes: 172_797,
-                }
+                })
             },
         ),
     ];

@@ -136,7 +136,7 @@ fn rebuild_reuses_storage_and_matches_fresh_build() {
     let before = lut.to_dense();
     assert!(matches!(
         lut.rebuild(&bad),
-        Err(InitError::InvalidCalibration { camera: 2, .. })
+        Err(LutError::InvalidCalibration { camera: 2, .. })
     ));
     assert_eq!(lut.to_dense(), before);
 }
@@ -157,8 +157,5 @@ fn the_digest_covers_every_array_the_gather_reads() {
     assert_ne!(lut.digest(), built);
     lut.count[0] ^= 1;
     lut.camera_start[3] += 1;
-    assert!(matches!(
-        lut.verify(),
-        Err(crate::error::StepError::LutCorrupt { .. })
-    ));
+    assert!(matches!(lut.verify(), Err(LutCorrupt { .. })));
 }

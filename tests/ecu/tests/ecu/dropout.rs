@@ -7,7 +7,7 @@ use satmap_ecu_tests::golden::{Golden, GoldenFrame, calibration, compiled_engine
 use satmap_ecu_tests::parity::STAGE_TOL;
 use satmap_runtime::frame::FrameLimits;
 use satmap_runtime::satellite::FixedCrop;
-use satmap_runtime::{CameraState, Frame, SatMap, StepError};
+use satmap_runtime::{CameraState, Frame, FrameError, SatMap, StepError};
 
 #[test]
 fn every_camera_dropped_in_turn_matches_the_reference() {
@@ -69,7 +69,7 @@ fn every_camera_dropped_in_turn_matches_the_reference() {
     };
     assert!(matches!(
         map.step(&none),
-        Err(StepError::NoCameraLeft { .. })
+        Err(StepError::Frame(FrameError::NoCameraLeft { .. }))
     ));
     assert!(map.step(&f.frame(10, w, h)).is_ok());
 }

@@ -3,7 +3,7 @@
 
 use core::fmt;
 
-use crate::frame::Axis;
+use crate::pose::Axis;
 
 /// A side of an image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -14,7 +14,7 @@ pub enum ImageSide {
     Width,
 }
 
-/// Why a [`ModelDims`] cannot run on this runtime.
+/// Why a [`ModelDims`](super::ModelDims) cannot run on this runtime.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum DimsError {

@@ -13,7 +13,8 @@
 //! order, so two compiles of one folder can differ in node names (not in what they compute).
 //! The artifact is what is pinned; its manifest records the folder digest it came from
 //! (`[compiled] source_digest`).
-//! The archive format is in [`super::archive`].
+//! The archive format is in [`crate::bundle::archive`]. This module imports the loader
+//! (`bundle`) and the engine (`engine_tract`); neither imports it.
 //!
 //! Precision: [`Precision::F32`] writes the decluttered graph as it is; [`Precision::F16`]
 //! stores its weights as f16 first ([`f16_weights`]); [`Precision::Int8`] stores its weights as
@@ -28,11 +29,11 @@ mod test_graphs;
 
 use std::time::Instant;
 
-use super::archive::write_archive;
-use super::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Trust};
+use crate::buffers::MemoryError;
+use crate::bundle::archive::write_archive;
+use crate::bundle::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Trust};
 use crate::engine::Stage;
 use crate::engine_tract::{HalfArithmetic, check_graph_io, engine_error, nnef_model, onnx_model};
-use crate::error::InitError;
 use crate::regions::check_regions_with;
 
 /// Why a folder bundle could not be compiled.
@@ -43,7 +44,7 @@ pub enum CompileError {
     Bundle(#[from] BundleError),
     /// The model's buffers do not fit the memory layout the bundle is compiled for.
     #[error("the model does not fit the memory layout: {0}")]
-    Layout(InitError),
+    Layout(MemoryError),
     /// The source is already a compiled bundle.
     #[error("{0} is already a compiled bundle")]
     AlreadyCompiled(std::path::PathBuf),
@@ -208,7 +209,7 @@ fn compiled_manifest(
         entry.insert("file".into(), file.clone().into());
         entry.insert(
             "sha256".into(),
-            super::Sha256Digest::of(tar).to_string().into(),
+            crate::bundle::Sha256Digest::of(tar).to_string().into(),
         );
     }
     let mut compiled = toml::Table::new();

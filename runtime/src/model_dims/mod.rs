@@ -10,9 +10,11 @@ use crate::capacity::{
     MAX_CAMERAS, MAX_FEATURES, MAX_KERNEL_POINTS, MAX_QUERIES, MAX_TOP_K, NUM_CLASSES, NUM_HEADS,
     NUM_POINTS,
 };
-use crate::error::{DimsError, ImageSide};
-use crate::frame::Axis;
+use crate::pose::Axis;
 use crate::satellite::CropSpec;
+
+mod error;
+pub use error::{DimsError, ImageSide};
 
 /// Coarsest satellite ground sampling distance a model may ask for, metres per pixel (the route
 /// pack's own limit): coarser crops would step the sampler by more pack pixels than it indexes.
@@ -23,8 +25,6 @@ pub const CLASS_NAMES: [&str; NUM_CLASSES] = ["divider", "ped_crossing", "bounda
 
 /// Shapes and geometry of one exported model configuration (`test`, `nano`, `paper`).
 #[derive(Clone, Debug, PartialEq)]
-#[cfg_attr(feature = "std", derive(serde::Deserialize))]
-#[cfg_attr(feature = "std", serde(try_from = "crate::bundle::ModelTable"))]
 pub struct ModelDims {
     /// Channels of every feature and BEV tensor (`D`).
     pub embed_dims: usize,
@@ -452,45 +452,5 @@ mod tests {
         let s = ModelDims::test_config().crop_spec();
         assert_eq!((s.height_px, s.width_px), (200, 100));
         assert_eq!((s.x_min_m, s.y_min_m, s.gsd_m), (-15.0, -30.0, 0.3));
-    }
-
-    #[cfg(feature = "std")]
-    #[test]
-    fn deserialises_the_manifest_model_table() {
-        let text = r#"
-config = "test"
-embed_dims = 32
-bev_h = 80
-bev_w = 40
-pc_range_m = [-15.0, -30.0, -2.0, 15.0, 30.0, 2.0]
-classes = ["divider", "ped_crossing", "boundary"]
-num_vec = 50
-num_pts = 20
-top_k = 50
-cameras = ["CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_FRONT_LEFT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_BACK_RIGHT"]
-image_scale = 0.2
-image_h = 180
-image_w = 320
-pad_h = 192
-pad_w = 320
-feat_h = 6
-feat_w = 10
-gkt_heights_m = [-1.5, -0.5, 0.5, 1.5]
-gkt_kernel = [3, 5]
-sat_h = 200
-sat_w = 100
-sat_gsd_m = 0.3
-"#;
-        let dims: ModelDims = toml::from_str(text).unwrap();
-        assert_eq!(dims, ModelDims::test_config());
-        let bad = text.replace("\"boundary\"", "\"kerb\"");
-        assert!(toml::from_str::<ModelDims>(&bad).is_err());
-        // Parsing does not range-check; `validate` (run by `Bundle::open`) does.
-        let bad = text.replace("top_k = 50", "top_k = 60");
-        let parsed: ModelDims = toml::from_str(&bad).unwrap();
-        assert_eq!(
-            parsed.validate(),
-            Err(DimsError::TopKTooLarge { top_k: 60, max: 50 })
-        );
     }
 }
