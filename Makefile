@@ -56,12 +56,18 @@ test-rust:
 # The engine's native passes (each bit for bit against tract's plan) and the demo drive's pinned
 # digest once more on the AVX2 + FMA tier of satmap-kernels, forced (SATMAP_KERNEL_TIER), on an
 # AVX-512 CPU: every tier gives the same bits, so the default tier's pins hold (the tiers' own
-# tests are in test-rust; NEON's run in test-aarch64). ~15 s with test-rust's binaries.
+# tests are in test-rust; NEON's run in test-aarch64). ~15 s with test-rust's binaries: the
+# engine's test binary is the one the workspace build made (a `-p` build would resolve features
+# apart and rebuild tract).
 test-tiers:
 	@if grep -qw avx512f /proc/cpuinfo; then \
 	  echo "SATMAP_KERNEL_TIER=avx2-fma: the engine's passes and the demo digest"; \
+	  engine=$$($(CARGO) test --workspace --exclude satmap-nostd-check --lib --no-run 2>&1 \
+	    | sed -n 's|.*(\(.*/deps/satmap_engine_tract-[0-9a-f]*\))$$|\1|p' | head -n 1); \
+	  test -x "$$engine" || { echo "test-tiers: no satmap-engine-tract test binary"; exit 1; }; \
+	  SATMAP_KERNEL_TIER=avx2-fma "$$engine" && \
 	  SATMAP_KERNEL_TIER=avx2-fma $(CARGO) test --workspace --exclude satmap-nostd-check \
-	    --lib --test harness_arena -- engine_tract demo_drive; \
+	    --test harness_arena -- demo_drive; \
 	else echo "test-tiers: skipped, this CPU lacks AVX-512F (the engine's native tests are built where it is)"; fi
 
 # Coverage-guided fuzzing (cargo fuzz, libFuzzer) of the parsers of outside bytes: 8 targets under fuzz/
@@ -156,7 +162,7 @@ $(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 CAPI_LIB := target/debug/deps/libsatmap_capi.a
 C_REPLAY := target/c/replay
 # The replay compares with examples/c/expected-<family>.txt, the family named by the library
-# itself (satmap_kernel_family(), the one rule in runtime/src/engine_tract/kernel_family.rs).
+# itself (satmap_kernel_family(), the one rule in runtime/engine_tract/src/kernel_family.rs).
 C_REPLAY_ARGS := models/bundles/test.satmap models/calibration/nuscenes_like.toml examples/c/scenario.bin \
   examples/c
 test-c:

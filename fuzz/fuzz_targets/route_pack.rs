@@ -1,7 +1,7 @@
 //! `PackSource::from_bytes` on route packs: header, route, tile index and their checksums; a
 //! pack that loads lists only tiles inside its bytes, and crops around its route. The first
 //! input byte picks the mode: odd recomputes both checksums after the mutation (offsets from
-//! `runtime/src/route_pack/FORMAT.md`), so edits of the header, route or index reach the field
+//! `runtime/core/src/route_pack/FORMAT.md`), so edits of the header, route or index reach the field
 //! rules behind them.
 #![no_main]
 

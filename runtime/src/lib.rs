@@ -1,52 +1,35 @@
-//! SatMap ECU runtime.
+//! `satmap-runtime`: the product as one dependency, a facade over the runtime's crates, chosen
+//! by feature. May import: `satmap-core`, and behind features `satmap-bundle` (`std`),
+//! `satmap-engine-tract` (`tract`), `satmap-translate` (`onnx`).
 //!
-//! The core (everything not behind `std`) is `no_std` + `alloc`: calibration, the GKT look-up
-//! table and gather-sum kernel, decode, input checks and the deterministic step state machine.
-//! The tract engine that runs the compiled stages sits behind the `tract` feature.
-#![cfg_attr(not(any(test, feature = "std")), no_std)]
+//! Without features it is the no_std + alloc core (`satmap-core`, re-exported whole at this
+//! crate's root); `std` adds bundle loading and the host's file reads, `tract` the graph engine,
+//! `onnx` the ONNX compiler and ONNX folder bundles. The paths an integrator uses
+//! (`satmap_runtime::SatMap`, `satmap_runtime::frame`, `satmap_runtime::engine_tract`) name the
+//! same items as the crates' own.
+#![no_std]
 #![deny(missing_docs)]
 
-extern crate alloc;
-
-mod buffers;
 #[cfg(feature = "std")]
-pub mod bundle;
-pub mod calibration;
-pub mod can_bus;
-pub mod capacity;
-pub mod decode;
-pub mod engine;
+extern crate std;
+
+pub use satmap_core::*;
+
+/// Camera rig calibration ([`satmap_core::calibration`]) and, with `std`, its TOML file
+/// ([`satmap_bundle::calibration_file`]).
+pub mod calibration {
+    #[cfg(feature = "std")]
+    pub use satmap_bundle::calibration_file::{
+        CalibrationFileError, from_toml_file, from_toml_str,
+    };
+    pub use satmap_core::calibration::*;
+}
+
+#[cfg(feature = "std")]
+pub use satmap_bundle as bundle;
+#[cfg(feature = "std")]
+pub use satmap_bundle::host_files;
 #[cfg(feature = "tract")]
-pub mod engine_tract;
-pub mod frame;
-pub mod geo;
-pub mod gkt;
-#[cfg(feature = "std")]
-pub mod host_files;
-pub mod map_frame;
-pub mod model_dims;
-pub mod placement;
-pub mod pose;
-pub mod regions;
-pub mod route_pack;
-pub mod satellite;
-pub mod step;
-#[cfg(test)]
-mod test_support;
+pub use satmap_engine_tract as engine_tract;
 #[cfg(feature = "onnx")]
-pub mod translate;
-
-// Crates whose types appear in the public API (`MapFrame` points, `MapFrame::elements`).
-pub use glam;
-pub use heapless;
-
-pub use buffers::MemoryError;
-pub use calibration::Calibration;
-pub use engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
-pub use frame::{CameraImage, CameraMask, CameraState, Frame, FrameError};
-pub use map_frame::{Health, MapClass, MapElement, MapFrame, SatellitePrior};
-pub use model_dims::{DimsError, ModelDims};
-pub use placement::RuntimeRegions;
-pub use pose::{EgoMotion, EgoPose};
-pub use satellite::{Coverage, CropSpec, SatelliteSource};
-pub use step::{InitError, SatMap, SliceDone, StepError, StepSlice};
+pub use satmap_translate as translate;

@@ -1,8 +1,7 @@
-//! The runtime's modules import each other without a circle (issue 40), at two levels: the
-//! crate's top-level modules (`crate::x` anywhere), and the engine's modules inside
-//! `engine_tract` (`super::x` from a top-level file or folder of it, `super::super::x` from
-//! inside a folder, `crate::engine_tract::x` anywhere). Read from the sources, outside test code
-//! and comments, then a depth-first search for a cycle. Tests are left out on purpose: a pass's
+//! The runtime's crates depend on each other as the crate map says (ARCHITECTURE.md), and inside
+//! each crate the top-level modules import each other without a circle (issue 40): `crate::x`
+//! anywhere, `super::x` from a top-level file, `super::super::x` from inside a folder. Read from
+//! the sources, outside test code and comments, then a depth-first search for a cycle. Tests are left out on purpose: a pass's
 //! tests stop the driver (`rewrite`) before their pass, and a module's tests may use any helper.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -169,26 +168,48 @@ fn cycle(graph: &Graph) -> Option<Vec<String>> {
         .find_map(|start| visit(graph, start, &mut Vec::new(), &mut done))
 }
 
-fn src() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+/// The `src` folder of the runtime crate in `runtime/<folder>`.
+fn src(folder: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(folder)
+        .join("src")
+}
+
+/// The top-level module graph of the crate in `runtime/<folder>`.
+fn crate_graph(folder: &str) -> Graph {
+    sibling_imports(
+        &src(folder),
+        &["crate::", "super::"],
+        &["crate::", "super::super::"],
+    )
 }
 
 #[test]
-fn the_crate_modules_import_each_other_without_a_circle() {
-    let graph = sibling_imports(&src(), &["crate::"], &["crate::"]);
-    // The reader sees what it should: the step wraps the errors of the modules below it, the
-    // compiler imports the loader and the engine, and nothing imports the step back.
-    assert!(graph["step"].contains("frame") && graph["step"].contains("gkt"));
-    assert!(graph["translate"].contains("bundle") && graph["translate"].contains("engine_tract"));
-    assert!(graph["engine_tract"].contains("bundle"));
+fn no_crate_of_the_runtime_has_an_import_circle() {
+    for folder in ["core", "bundle", "engine_tract", "translate", "kernels"] {
+        let graph = crate_graph(folder);
+        assert!(graph.len() > 1, "{folder}: modules found");
+        assert_eq!(cycle(&graph), None, "{folder}: {graph:#?}");
+    }
+    // The reader sees what it should. Core: the step wraps the errors of the modules below it,
+    // and nothing imports the step back.
+    let core = crate_graph("core");
+    assert!(core["step"].contains("frame") && core["step"].contains("gkt"));
     assert!(
-        graph.values().all(|deps| !deps.contains("step")),
-        "{graph:#?}"
+        core.values().all(|deps| !deps.contains("step")),
+        "{core:#?}"
     );
-    assert_eq!(cycle(&graph), None, "{graph:#?}");
-    // A circle is found where there is one (the one issue 40 found: a shared error module that
-    // imported the modules whose errors it defined).
-    let mut with_circle = graph.clone();
+    // Engine: the driver imports the passes, the passes the helpers.
+    let engine = crate_graph("engine_tract");
+    assert!(engine["rewrite"].contains("epilogue") && engine["rewrite"].contains("gemm"));
+    assert!(engine["epilogue"].contains("graph_match") && engine["epilogue"].contains("finish"));
+    assert!(
+        engine["gemm"].contains("pool"),
+        "gemm/blocks.rs imports pool"
+    );
+    // And a circle is found where there is one (the one issue 40 found in the core: a shared
+    // error module that imported the modules whose errors it defined).
+    let mut with_circle = core.clone();
     with_circle
         .get_mut("frame")
         .expect("a module")
@@ -196,27 +217,58 @@ fn the_crate_modules_import_each_other_without_a_circle() {
     assert!(cycle(&with_circle).is_some());
 }
 
+/// The SatMap crates a runtime crate's manifest names under `[dependencies]`.
+fn satmap_dependencies(folder: &str) -> BTreeSet<String> {
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(folder)
+        .join("Cargo.toml");
+    let text = std::fs::read_to_string(&manifest).expect("a crate manifest is readable");
+    let mut in_dependencies = false;
+    let mut found = BTreeSet::new();
+    for line in text.lines() {
+        if line.starts_with('[') {
+            in_dependencies = line == "[dependencies]";
+        } else if in_dependencies && line.starts_with("satmap-") {
+            let name = line.split([' ', '=']).next().unwrap_or_default();
+            found.insert(name.to_string());
+        }
+    }
+    found
+}
+
 #[test]
-fn the_engine_modules_import_each_other_without_a_circle() {
-    let graph = sibling_imports(
-        &src().join("engine_tract"),
-        &["super::", "crate::engine_tract::"],
-        &["super::super::", "crate::engine_tract::"],
-    );
-    // The reader sees what it should: the driver imports the passes, the passes the helpers.
-    assert!(graph["rewrite"].contains("epilogue") && graph["rewrite"].contains("gemm"));
-    assert!(graph["epilogue"].contains("graph_match") && graph["epilogue"].contains("finish"));
-    assert!(
-        graph["gemm"].contains("pool"),
-        "gemm/blocks.rs imports pool"
-    );
-    assert_eq!(cycle(&graph), None, "{graph:#?}");
-    let mut with_circle = graph.clone();
-    with_circle
-        .get_mut("graph_match")
-        .expect("a module")
-        .insert("rewrite".into());
-    assert!(cycle(&with_circle).is_some());
+fn each_crate_imports_only_what_the_crate_map_allows() {
+    let allowed: [(&str, &[&str]); 6] = [
+        ("core", &[]),
+        ("kernels", &[]),
+        ("bundle", &["satmap-core"]),
+        (
+            "engine_tract",
+            &["satmap-core", "satmap-bundle", "satmap-kernels"],
+        ),
+        (
+            "translate",
+            &["satmap-core", "satmap-bundle", "satmap-engine-tract"],
+        ),
+        (
+            ".",
+            &[
+                "satmap-core",
+                "satmap-bundle",
+                "satmap-engine-tract",
+                "satmap-translate",
+            ],
+        ),
+    ];
+    for (folder, allowed) in allowed {
+        let found = satmap_dependencies(folder);
+        let allowed: BTreeSet<String> = allowed.iter().map(|s| s.to_string()).collect();
+        assert!(
+            found.is_subset(&allowed),
+            "{folder}: {found:?} beyond {allowed:?}"
+        );
+    }
+    assert!(satmap_dependencies("engine_tract").contains("satmap-kernels"));
 }
 
 #[test]
@@ -226,4 +278,45 @@ fn test_code_is_told_apart_from_product_code() {
     let code = non_test_code(text);
     assert_eq!(code, "use crate::a::X;\nuse crate::b;");
     assert_eq!(imported_names("{a, b::{c, d}, e}"), ["a", "b", "e"]);
+}
+
+/// `satmap-core` builds without tract and without the host crates: its normal dependency tree
+/// (`cargo tree -p satmap-core -e normal`) names no tract crate, no other SatMap crate and none
+/// of the std-only crates of the bundle side. (That it links without std is `make nostd`.)
+#[test]
+fn the_core_names_no_tract_and_no_host_crate() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = std::process::Command::new(&cargo)
+        .args(["tree", "--offline", "-p", "satmap-core", "-e", "normal"])
+        .args(["--prefix", "none", "--format", "{p}"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("cargo runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let tree = String::from_utf8(out.stdout).expect("cargo tree prints UTF-8");
+    let crates: BTreeSet<&str> = tree.lines().filter_map(|l| l.split(' ').next()).collect();
+    assert!(
+        crates.contains("satmap-core") && crates.contains("glam"),
+        "{tree}"
+    );
+    for banned in ["thiserror", "serde", "toml", "tar", "sha2", "rayon"] {
+        assert!(
+            !crates.contains(banned),
+            "satmap-core pulls {banned}:\n{tree}"
+        );
+    }
+    for krate in &crates {
+        assert!(
+            !krate.starts_with("tract-"),
+            "satmap-core pulls {krate}:\n{tree}"
+        );
+        assert!(
+            !krate.starts_with("satmap-") || *krate == "satmap-core",
+            "satmap-core pulls {krate}:\n{tree}"
+        );
+    }
 }

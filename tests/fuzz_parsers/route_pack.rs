@@ -19,7 +19,7 @@ use crate::runner::Outcome::{Accepted, Refused};
 use crate::runner::{CaseResult, Input, assert_seeds_accepted, fuzz};
 use crate::seeds::{BoxImagery, CROP, pack_options, seed_route_geojson};
 
-/// Recompute both checksums (offsets from `runtime/src/route_pack/FORMAT.md`) so an edit of the
+/// Recompute both checksums (offsets from `runtime/core/src/route_pack/FORMAT.md`) so an edit of the
 /// header, route or index reaches the field rules behind them.
 fn reseal(bytes: &mut [u8]) {
     if bytes.len() < HEADER_LEN {

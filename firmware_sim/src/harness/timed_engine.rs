@@ -2,7 +2,7 @@
 //! made inside engine calls, into series reserved before the replay (recording never allocates).
 //!
 //! The native GKT gather-sum runs inside `SatMap::step` between the last `image_encoder` call
-//! and the `bev_encoder` call, with nothing else in between (see `runtime/src/step.rs`), so its
+//! and the `bev_encoder` call, with nothing else in between (see `runtime/core/src/step.rs`), so its
 //! latency is the gap between those two calls: the decorator records it as `gkt_gather` without
 //! the runtime having to time itself.
 

@@ -57,7 +57,7 @@ CROSS_FAMILY_RTOL = 1e-5
 def kernel_family() -> str:
     """The CPU's kernel family (`intel-avx512f`, `amd-fma`, `aarch64-neon`, ...), asked of the
     runtime itself (`satmap-sim kernel-family`, the one rule in
-    `runtime/src/engine_tract/kernel_family.rs`): onnxruntime's x86 kernels follow the same
+    `runtime/engine_tract/src/kernel_family.rs`): onnxruntime's x86 kernels follow the same
     vendor and tier split as tract's. The binary is `$SATMAP_SIM`, or the one `make test` builds
     (`target/debug/satmap-sim`). Asked once per process: the staleness checks ask per tensor."""
     sim = os.environ.get("SATMAP_SIM") or str(MODELS_ROOT.parent / "target" / "debug" / "satmap-sim")

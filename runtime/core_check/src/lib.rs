@@ -15,10 +15,9 @@
 
 extern crate alloc;
 
-mod rig;
 mod steps;
 
-pub use rig::NUSCENES_LIKE;
+pub use satmap_runtime::calibration_rig::NUSCENES_LIKE;
 pub use steps::run;
 
 /// The embedded golden frame 0 (the trained `test` model's goldens).

@@ -2,7 +2,7 @@
 //!
 //! The file names every buffer the runtime holds (shape, dtype, bytes), the arena the graph
 //! engine allocates from, and the budgets (peak bytes, per-stage and per-step latency). This
-//! crate parses and checks it (for `runtime/build.rs`, which turns it into constants, and for the
+//! crate parses and checks it (for `runtime/core/build.rs`, which turns it into constants, and for the
 //! host tools, which print it like a linker map). Messages prefixed `ERROR(layout):` mean the
 //! file is wrong; they come with the fix.
 #![deny(missing_docs)]
@@ -329,11 +329,11 @@ impl MemoryLayout {
     }
 
     /// Rust source with one `pub const <NAME>_BYTES: usize` and `<NAME>_SHAPE` per region, the
-    /// arena sizes and the budgets: what `runtime/build.rs` writes to `OUT_DIR`.
+    /// arena sizes and the budgets: what `runtime/core/build.rs` writes to `OUT_DIR`.
     #[must_use]
     pub fn to_rust_consts(&self) -> String {
         let mut s = String::from(
-            "// Generated from memory_layout.toml by runtime/build.rs. Edit the TOML.\n",
+            "// Generated from memory_layout.toml by runtime/core/build.rs. Edit the TOML.\n",
         );
         let _ = writeln!(s, "/// Model configuration the capacities are sized for.");
         let _ = writeln!(s, "pub const SIZED_FOR: &str = {:?};", self.sized_for);
