@@ -381,7 +381,7 @@ pub fn replay_observed(
                     cameras_present: sensor.cameras.map(|c| c.present),
                     camera_age_us: sensor.cameras.map(|c| c.age_us),
                     camera_states: satmap.last_map().map(|m| m.health.cameras),
-                    crop_rgb: satmap.crop(),
+                    crop_rgb: satmap.buffers().crop(),
                     crop_spec: dims.crop_spec(),
                     world_pose: sensor.world_pose,
                     fix,
@@ -401,7 +401,7 @@ pub fn replay_observed(
                 ));
                 if k + 1 == frames {
                     last = Some(LastStep {
-                        crop_rgb: satmap.crop().to_vec(),
+                        crop_rgb: satmap.buffers().crop().to_vec(),
                         crop_spec: dims.crop_spec(),
                         images: images.clone(),
                         image_w_px: dims.image_w,

@@ -13,8 +13,10 @@ mod create;
 mod ffi_types;
 #[cfg(test)]
 mod liveness_tests;
+mod map_output;
 mod runtime;
 mod status;
+mod step;
 
 pub use create::{satmap_create, satmap_create_trusted, satmap_destroy, satmap_region_info};
 pub use ffi_types::{
@@ -23,9 +25,11 @@ pub use ffi_types::{
     SatmapBundleTrust, SatmapCameraImage, SatmapFrame, SatmapRegion, SatmapRegionInfo, SatmapSlice,
     SatmapSliceInfo,
 };
+pub use map_output::{satmap_check_map_frame, satmap_map_frame};
 pub use runtime::{
-    SatmapRuntime, satmap_check_map_frame, satmap_kernel_family, satmap_last_error,
-    satmap_map_frame, satmap_recalibrate, satmap_reset, satmap_step, satmap_step_abort,
-    satmap_step_begin, satmap_step_finish, satmap_step_run_next,
+    SatmapRuntime, satmap_kernel_family, satmap_last_error, satmap_recalibrate, satmap_reset,
+};
+pub use step::{
+    satmap_step, satmap_step_abort, satmap_step_begin, satmap_step_finish, satmap_step_run_next,
 };
 pub use status::SatmapStatus;

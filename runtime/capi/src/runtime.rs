@@ -11,12 +11,11 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::glam::{DVec2, Vec3};
-use satmap_runtime::map_frame::wire;
 use satmap_runtime::satellite::{Coverage, CropSpec, SatelliteSource};
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
 
 use crate::create::path_of;
-use crate::ffi_types::{SATMAP_NUM_CAMERAS, SatmapFrame, SatmapSliceInfo};
+use crate::ffi_types::{SATMAP_NUM_CAMERAS, SatmapFrame};
 use crate::status::SatmapStatus;
 
 /// The satellite crop the caller hands in with each frame.
@@ -65,7 +64,7 @@ const DEAD_MESSAGE: &str = "a call panicked inside the runtime (a bug): this han
                             satmap_destroy it and satmap_create another";
 
 impl SatmapRuntime {
-    fn fail(&mut self, status: SatmapStatus, what: &dyn core::fmt::Display) -> SatmapStatus {
+    pub(crate) fn fail(&mut self, status: SatmapStatus, what: &dyn core::fmt::Display) -> SatmapStatus {
         self.message.clear();
         // A message longer than the buffer is cut, never an error.
         let _ = write!(self.message, "{what}");
@@ -132,7 +131,7 @@ pub(crate) fn with_runtime(
 }
 
 /// Run `f` on the runtime and frame behind the pointers ([`with_runtime`]).
-fn with_frame(
+pub(crate) fn with_frame(
     rt: *mut SatmapRuntime,
     frame: *const SatmapFrame,
     f: impl FnOnce(&mut SatmapRuntime, &Frame<'_>) -> SatmapStatus,
@@ -149,173 +148,6 @@ fn with_frame(
             len: frame.satellite_len,
         };
         f(rt, &rust_frame)
-    })
-}
-
-/// Run one whole step on `frame`.
-///
-/// # Safety
-/// `rt` from `satmap_create`; `frame` and its pointers valid for the call.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_step(
-    rt: *mut SatmapRuntime,
-    frame: *const SatmapFrame,
-) -> SatmapStatus {
-    with_frame(rt, frame, |rt, f| match rt.map.step(f) {
-        Ok(_) => SatmapStatus::Ok,
-        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
-    })
-}
-
-/// Start a staged step: check `frame`, run nothing. The frame and its pointers must stay valid
-/// until `satmap_step_finish` or `satmap_step_abort`.
-///
-/// # Safety
-/// As [`satmap_step`], with the longer lifetime.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_step_begin(
-    rt: *mut SatmapRuntime,
-    frame: *const SatmapFrame,
-) -> SatmapStatus {
-    with_frame(rt, frame, |rt, f| match rt.map.step_begin(f) {
-        Ok(()) => SatmapStatus::Ok,
-        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
-    })
-}
-
-/// Run the next slice of the staged step; `frame` is the one given to `satmap_step_begin`.
-/// `info` (may be NULL) receives the slice and how many remain.
-///
-/// # Safety
-/// As [`satmap_step_begin`]; `info` NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_step_run_next(
-    rt: *mut SatmapRuntime,
-    frame: *const SatmapFrame,
-    info: *mut SatmapSliceInfo,
-) -> SatmapStatus {
-    with_frame(rt, frame, |rt, f| match rt.map.step_run_next(f) {
-        Ok(done) => {
-            // SAFETY: NULL or valid, per the contract.
-            if let Some(info) = unsafe { info.as_mut() } {
-                *info = SatmapSliceInfo {
-                    slice: done.slice.into(),
-                    remaining: done.remaining,
-                };
-            }
-            SatmapStatus::Ok
-        }
-        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
-    })
-}
-
-/// Publish the staged step's map.
-///
-/// # Safety
-/// `rt` from `satmap_create`.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_step_finish(rt: *mut SatmapRuntime) -> SatmapStatus {
-    with_runtime(rt, |rt| match rt.map.step_finish() {
-        Ok(_) => SatmapStatus::Ok,
-        Err(e) => rt.fail(SatmapStatus::from(&e), &e),
-    })
-}
-
-/// Drop the staged step in progress, if any.
-///
-/// # Safety
-/// `rt` from `satmap_create`.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_step_abort(rt: *mut SatmapRuntime) -> SatmapStatus {
-    with_runtime(rt, |rt| {
-        rt.map.step_abort();
-        SatmapStatus::Ok
-    })
-}
-
-/// Serialise the last published map frame with its E2E protection (layout in
-/// ARCHITECTURE.md, "Protected map frame") into `buf`; `*written` receives its length.
-/// `SATMAP_MAX_WIRE_BYTES` always suffices.
-///
-/// # Safety
-/// `rt` from `satmap_create`; `buf` valid for `cap` bytes; `written` valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_map_frame(
-    rt: *const SatmapRuntime,
-    data_id: u32,
-    buf: *mut u8,
-    cap: usize,
-    written: *mut usize,
-) -> SatmapStatus {
-    guard(|| {
-        // SAFETY: NULL or valid, per the contract.
-        let (Some(rt), Some(written)) = (unsafe { rt.as_ref() }, unsafe { written.as_mut() })
-        else {
-            return SatmapStatus::NullArgument;
-        };
-        if rt.liveness == Liveness::Dead {
-            return SatmapStatus::Panic;
-        }
-        *written = 0;
-        if buf.is_null() {
-            return SatmapStatus::NullArgument;
-        }
-        let Some(map) = rt.map.last_map() else {
-            return SatmapStatus::NoMapYet;
-        };
-        // SAFETY: `cap` writable bytes, per the contract.
-        let out = unsafe { core::slice::from_raw_parts_mut(buf, cap) };
-        match wire::serialise(map, data_id, out) {
-            Ok(n) => {
-                *written = n;
-                SatmapStatus::Ok
-            }
-            Err(e) => SatmapStatus::from(&e),
-        }
-    })
-}
-
-/// Check a received serialised map frame (length, CRC-32/AUTOSAR, data id, then every field:
-/// element count against the length, reserved bytes, health codes, coverage, classes, scores
-/// finite in [0, 1], finite points); on success `*sequence` and `*counter` (each may be NULL)
-/// receive the frame's sequence and E2E counter. A frame that passes can be read by its element
-/// count without reading past `len`. A `len` above the largest map frame is refused unread.
-///
-/// # Safety
-/// `bytes` valid for `len` bytes; `sequence` and `counter` NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn satmap_check_map_frame(
-    bytes: *const u8,
-    len: usize,
-    data_id: u32,
-    sequence: *mut u64,
-    counter: *mut u16,
-) -> SatmapStatus {
-    guard(|| {
-        if bytes.is_null() {
-            return SatmapStatus::NullArgument;
-        }
-        // No map frame is longer: refused before a slice is made of a length no buffer has
-        // (`SIZE_MAX` would break the slice's own contract).
-        if len > wire::MAX_WIRE_BYTES {
-            return SatmapStatus::WireInvalid;
-        }
-        // SAFETY: `len` readable bytes, per the contract, and at most MAX_WIRE_BYTES.
-        let frame = unsafe { core::slice::from_raw_parts(bytes, len) };
-        match wire::check(frame, data_id) {
-            Ok(c) => {
-                // SAFETY: NULL or valid, per the contract.
-                if let Some(s) = unsafe { sequence.as_mut() } {
-                    *s = c.sequence;
-                }
-                // SAFETY: NULL or valid, per the contract.
-                if let Some(n) = unsafe { counter.as_mut() } {
-                    *n = c.counter;
-                }
-                SatmapStatus::Ok
-            }
-            Err(e) => SatmapStatus::from(&e),
-        }
     })
 }
 

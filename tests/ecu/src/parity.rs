@@ -20,14 +20,14 @@ pub const CAN_BUS_TOL: f32 = 1e-6;
 /// `map`'s stage buffers in [`STAGE_BUFFERS`]' order.
 fn buffers<S: SatelliteSource>(map: &SatMap<TractEngine, S>) -> [&[f32]; 8] {
     [
-        map.value(),
-        map.query(),
-        map.weights(),
-        map.gathered(),
-        map.camera_bev(),
-        map.satellite_bev(),
-        map.logits(),
-        map.points(),
+        map.buffers().value(),
+        map.buffers().query(),
+        map.buffers().weights(),
+        map.buffers().gathered(),
+        map.buffers().camera_bev(),
+        map.buffers().satellite_bev(),
+        map.buffers().logits(),
+        map.buffers().points(),
     ]
 }
 
@@ -136,7 +136,7 @@ pub fn golden_frames_match(engine: impl Fn() -> TractEngine, what: &str) {
         for (name, d) in check_stages(&map, &f, &format!("{what} frame {index}")) {
             println!("{what} frame {index} {name}: max abs diff {d:.2e} (tolerance {STAGE_TOL:e})");
         }
-        assert_eq!(map.crop(), &f.satellite[..]);
+        assert_eq!(map.buffers().crop(), &f.satellite[..]);
         assert_eq!(out.health.satellite, SatellitePrior::Present);
         assert!(!out.health.degraded);
         check_decoded(&out, &f, "");
@@ -157,10 +157,10 @@ pub fn degraded_frame_matches(engine: impl Fn() -> TractEngine, what: &str) {
     let out = map.step(&f.frame(1, w, h)).unwrap().clone();
     assert!(out.health.degraded);
     assert_eq!(out.health.satellite, SatellitePrior::Missing);
-    assert!(map.satellite_bev().iter().all(|&v| v == 0.0));
-    let d = max_abs_diff(map.logits(), &f.golden.f32s("degraded_class_logits"));
+    assert!(map.buffers().satellite_bev().iter().all(|&v| v == 0.0));
+    let d = max_abs_diff(map.buffers().logits(), &f.golden.f32s("degraded_class_logits"));
     assert!(d <= STAGE_TOL, "{what} degraded logits {d:e}");
-    let d = max_abs_diff(map.points(), &f.golden.f32s("degraded_points"));
+    let d = max_abs_diff(map.buffers().points(), &f.golden.f32s("degraded_points"));
     assert!(d <= STAGE_TOL, "{what} degraded points {d:e}");
 }
 

@@ -12,7 +12,7 @@
 
 use super::codec::decode_tile;
 use super::crop::MAX_CROP_TILES;
-use super::format::RoutePack;
+use super::parse::RoutePack;
 
 /// Tile cache capacity, entries (one per tile; each entry is 16 bytes of state, the pixels stay
 /// in the pack image). `memory_layout.toml` (`region.tile_cache`) records the same 64 x 16 B.

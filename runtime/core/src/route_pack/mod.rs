@@ -8,7 +8,8 @@
 //! decoded into a caller-owned tile buffer (`memory_layout.toml`, `region.tile_pixels`) when a
 //! tile is first needed, prefetched two tiles ahead along the route.
 //!
-//! - [`format`]: the zero-copy parser ([`RoutePack`]) that validates header and index at load.
+//! - [`format`]: the byte layout: constants, offsets, the header ([`PackHeader`]).
+//! - [`parse`]: the zero-copy parser ([`RoutePack`]) that validates header and index at load.
 //! - [`writer`]: the encoder the host builder and tests use.
 //! - [`error`]: [`PackError`], why an image was refused.
 //! - [`codec`]: the tile codecs ([`TileCodec`]) and the no_std decoder ([`decode_tile`]).
@@ -39,6 +40,7 @@ pub mod crop_bound;
 mod crop_window;
 pub mod error;
 pub mod format;
+pub mod parse;
 pub mod route;
 pub mod writer;
 
@@ -46,7 +48,9 @@ pub use cache::{PREFETCH_TILES_PER_STEP, TILE_CACHE_TILES, TileState};
 pub use codec::{DecodeFault, TileCodec, decode_tile};
 pub use crop::{CropFault, CropReport, FILL_RGB, MAX_CROP_TILES, PackSource};
 pub use crop_bound::crop_tile_bound;
-pub use format::{PackError, PackHeader, RoutePack, TileKey};
+pub use error::PackError;
+pub use format::{PackHeader, TileKey};
+pub use parse::RoutePack;
 pub use route::{
     MAX_ROUTE_SEGMENTS_PER_STEP, ROUTE_SWEEP_PER_STEP, ROUTE_WALK_SEGMENTS, ROUTE_WINDOW_AHEAD,
     ROUTE_WINDOW_BACK, RouteCursor, RouteState,

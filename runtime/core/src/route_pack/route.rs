@@ -25,7 +25,7 @@
 
 use glam::DVec2;
 
-use super::format::RoutePack;
+use super::parse::RoutePack;
 
 /// Segments searched behind the last matched one.
 pub const ROUTE_WINDOW_BACK: usize = 16;

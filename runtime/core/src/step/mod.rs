@@ -16,24 +16,23 @@
 
 mod buffers;
 mod error;
+mod slices;
 mod staged;
 
 pub use buffers::StepBuffers;
 pub use error::{InitError, StepError};
 pub use staged::{FramePart, SliceDone, StepSlice};
-use staged::{ImageSeen, Pending, Slices};
+use staged::{ImageSeen, Pending, Slices, changed_part};
 
 use crate::calibration::Calibration;
-use crate::can_bus::can_bus;
-use crate::capacity::CAN_BUS_LEN;
 use crate::decode::decode;
 use crate::engine::Engine;
 use crate::frame::{Frame, FrameLimits, LastStep, check_frame};
-use crate::gkt::{Lut, gather_sum};
+use crate::gkt::Lut;
 use crate::map_frame::{self, Health, MapFrame, SatellitePrior};
 use crate::model_dims::ModelDims;
 use crate::placement::RuntimeRegions;
-use crate::satellite::{Coverage, SatelliteSource};
+use crate::satellite::SatelliteSource;
 
 /// Largest magnitude of a normalised decoder point the step publishes (the model's points are
 /// sigmoid outputs in [0, 1]): anything beyond, or NaN, is [`StepError::NonFiniteOutput`].
@@ -279,93 +278,6 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         self.pending.and_then(|p| p.next()).map(|(_, s)| s)
     }
 
-    fn run_slice(
-        &mut self,
-        slice: StepSlice,
-        frame: &Frame<'_>,
-        p: &mut Pending,
-    ) -> Result<(), StepError> {
-        let b = &mut self.buffers;
-        match slice {
-            StepSlice::BevQuery => {
-                b.can_bus = can_bus(&frame.pose, &frame.motion);
-                self.engine
-                    .bev_query(&b.can_bus, &mut b.query, &mut b.weights)?;
-                finite(slice, &[&b.query, &b.weights])?;
-            }
-            StepSlice::ImageEncoder { camera } => {
-                let camera = usize::from(camera);
-                let value_len = self.dims.value_len();
-                // step_begin checked this image; only a different frame can lack it here.
-                let (Some(image), Some(value)) = (
-                    frame.images.get(camera).copied().flatten(),
-                    b.value.chunks_exact_mut(value_len).nth(camera),
-                ) else {
-                    return Err(StepError::FrameMismatch {
-                        expected_sequence: p.sequence,
-                        got_sequence: frame.sequence,
-                    });
-                };
-                self.engine.encode_image(camera, image.rgb, value)?;
-                finite(slice, &[value])?;
-            }
-            StepSlice::GktGather => {
-                // The table lives in caller memory: a stray write there changed every later map
-                // silently (issue 38 found 30 of 200 single-bit flips doing so).
-                self.lut.verify()?;
-                gather_sum(
-                    &self.lut,
-                    &b.value,
-                    &b.weights,
-                    &mut b.gathered,
-                    p.cameras.mask,
-                )?;
-                finite(slice, &[&b.gathered])?;
-            }
-            StepSlice::BevEncoder => {
-                self.engine
-                    .bev_encode(&b.query, &b.gathered, &mut b.camera_bev)?;
-                finite(slice, &[&b.camera_bev])?;
-            }
-            StepSlice::Satellite => {
-                let spec = self.dims.crop_spec();
-                let coverage = self.satellite.crop(&p.pose, &spec, &mut b.crop);
-                let (prior, degraded) = match coverage {
-                    Coverage::Full => (SatellitePrior::Present, false),
-                    Coverage::Partial { covered_permille } => {
-                        (SatellitePrior::Partial { covered_permille }, false)
-                    }
-                    Coverage::None => (SatellitePrior::Missing, true),
-                    Coverage::Corrupt => (SatellitePrior::Corrupt, true),
-                };
-                if degraded {
-                    b.satellite_bev.fill(0.0);
-                } else {
-                    self.engine
-                        .encode_satellite(&b.crop, &mut b.satellite_bev)?;
-                    finite(slice, &[&b.satellite_bev])?;
-                }
-                (p.prior, p.degraded) = (prior, degraded);
-            }
-            StepSlice::MapDecoder => {
-                self.engine.decode_map(
-                    &b.camera_bev,
-                    &b.satellite_bev,
-                    &mut b.logits,
-                    &mut b.points,
-                )?;
-                finite(slice, &[&b.logits])?;
-                // Points are normalised to the BEV range (sigmoid outputs in [0, 1]); a finite
-                // but huge value would still decode to an infinite coordinate in metres, so
-                // they are bounded, not only finite (NaN fails the bound too).
-                if !b.points.iter().all(|v| v.abs() <= MAX_NORMALISED_POINT) {
-                    return Err(StepError::NonFiniteOutput { slice });
-                }
-            }
-        }
-        Ok(())
-    }
-
     /// Rebuild the GKT look-up table for a new calibration (or the same one, to repair a table
     /// a step found corrupt: [`StepError::LutCorrupt`]); the model stays loaded and nothing is
     /// allocated.
@@ -444,70 +356,6 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
     pub const fn buffers(&self) -> &StepBuffers {
         &self.buffers
     }
-
-    // Shorthands for the most used views of [`StepBuffers`], kept so that existing callers
-    // (`tests/integration/golden_step.rs`, the sim harness) need not change.
-
-    /// CAN-bus vector of the last attempted step; see [`StepBuffers::can_bus`].
-    #[must_use]
-    pub const fn can_bus(&self) -> &[f32; CAN_BUS_LEN] {
-        self.buffers.can_bus()
-    }
-
-    /// Value features `[6, F, D]`; see [`StepBuffers::value`].
-    #[must_use]
-    pub fn value(&self) -> &[f32] {
-        self.buffers.value()
-    }
-
-    /// BEV queries `[Q, D]`; see [`StepBuffers::query`].
-    #[must_use]
-    pub fn query(&self) -> &[f32] {
-        self.buffers.query()
-    }
-
-    /// GKT weights `[Q, 4, kp]`; see [`StepBuffers::weights`].
-    #[must_use]
-    pub fn weights(&self) -> &[f32] {
-        self.buffers.weights()
-    }
-
-    /// Gather-sum output `[Q, D]`; see [`StepBuffers::gathered`].
-    #[must_use]
-    pub fn gathered(&self) -> &[f32] {
-        self.buffers.gathered()
-    }
-
-    /// Camera BEV `[bev_h, bev_w, D]`; see [`StepBuffers::camera_bev`].
-    #[must_use]
-    pub fn camera_bev(&self) -> &[f32] {
-        self.buffers.camera_bev()
-    }
-
-    /// Satellite crop `[sat_h, sat_w, 3]`; see [`StepBuffers::crop`].
-    #[must_use]
-    pub fn crop(&self) -> &[u8] {
-        self.buffers.crop()
-    }
-
-    /// Satellite BEV `[bev_h, bev_w, D]` (zeros when degraded); see
-    /// [`StepBuffers::satellite_bev`].
-    #[must_use]
-    pub fn satellite_bev(&self) -> &[f32] {
-        self.buffers.satellite_bev()
-    }
-
-    /// Class logits `[num_vec, 3]`; see [`StepBuffers::logits`].
-    #[must_use]
-    pub fn logits(&self) -> &[f32] {
-        self.buffers.logits()
-    }
-
-    /// Normalised points `[num_vec, num_pts, 2]`; see [`StepBuffers::points`].
-    #[must_use]
-    pub fn points(&self) -> &[f32] {
-        self.buffers.points()
-    }
 }
 
 /// The checks both constructors make before any buffer exists: the limits, the engine's
@@ -528,32 +376,3 @@ mod hardening_tests;
 mod lut_integrity_tests;
 #[cfg(test)]
 mod tests;
-
-/// Every value of `outputs` finite, or the slice's [`StepError::NonFiniteOutput`]: one counted
-/// pass over what the slice wrote (a bad input such as a finite 1e38 velocity otherwise turns
-/// the BEV non-finite and still decodes to a map marked healthy).
-fn finite(slice: StepSlice, outputs: &[&[f32]]) -> Result<(), StepError> {
-    if outputs.iter().all(|o| o.iter().all(|v| v.is_finite())) {
-        Ok(())
-    } else {
-        Err(StepError::NonFiniteOutput { slice })
-    }
-}
-
-/// The part of `frame` that `slice` reads and that differs from what `step_begin` checked;
-/// always `None` in a one-call step.
-fn changed_part(slice: StepSlice, frame: &Frame<'_>, p: &Pending) -> Option<FramePart> {
-    let seen = p.seen.as_ref()?;
-    match slice {
-        StepSlice::BevQuery => {
-            (frame.pose != p.pose || frame.motion != p.motion).then_some(FramePart::Motion)
-        }
-        StepSlice::ImageEncoder { camera } => {
-            let c = usize::from(camera);
-            let now = frame.images.get(c).copied().flatten();
-            (now.as_ref().map(ImageSeen::of) != seen.get(c).copied().flatten())
-                .then_some(FramePart::Image { camera })
-        }
-        _ => None,
-    }
-}

@@ -18,7 +18,7 @@
 //! [`StepError::StepInProgress`]: crate::StepError::StepInProgress
 
 use crate::calibration::NUM_CAMERAS;
-use crate::frame::{CameraImage, CameraUse};
+use crate::frame::{CameraImage, CameraUse, Frame};
 use crate::map_frame::SatellitePrior;
 use crate::pose::{EgoMotion, EgoPose};
 
@@ -172,5 +172,23 @@ impl Pending {
             .count();
         let fixed_after = (NUM_CAMERAS + 1..SLOTS).filter(|&s| s > slot).count();
         (cameras_after + fixed_after) as u8
+    }
+}
+
+/// The part of `frame` that `slice` reads and that differs from what `step_begin` checked;
+/// always `None` in a one-call step.
+pub(super) fn changed_part(slice: StepSlice, frame: &Frame<'_>, p: &Pending) -> Option<FramePart> {
+    let seen = p.seen.as_ref()?;
+    match slice {
+        StepSlice::BevQuery => {
+            (frame.pose != p.pose || frame.motion != p.motion).then_some(FramePart::Motion)
+        }
+        StepSlice::ImageEncoder { camera } => {
+            let c = usize::from(camera);
+            let now = frame.images.get(c).copied().flatten();
+            (now.as_ref().map(ImageSeen::of) != seen.get(c).copied().flatten())
+                .then_some(FramePart::Image { camera })
+        }
+        _ => None,
     }
 }

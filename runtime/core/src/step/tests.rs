@@ -8,7 +8,9 @@ use super::*;
 use crate::engine::{BackendFault, EngineError, EngineErrorKind, Stage};
 use crate::frame::{CameraImage, FrameError};
 use crate::pose::EgoPose;
-use crate::satellite::{CropSpec, FixedCrop, NoSatellite};
+use crate::can_bus::can_bus;
+use crate::gkt::gather_sum;
+use crate::satellite::{Coverage, CropSpec, FixedCrop, NoSatellite};
 use crate::test_support::{FakeEngine, Images, count_allocations, crop, nuscenes_like};
 
 fn runtime<'a>(crop: &'a [u8]) -> SatMap<FakeEngine, FixedCrop<'a>> {
@@ -65,16 +67,16 @@ fn good_step_runs_every_stage_and_publishes() {
     let mut gathered = alloc::vec![0.0f32; dims.bev_len()];
     gather_sum(
         rt.lut(),
-        rt.value(),
-        rt.weights(),
+        rt.buffers().value(),
+        rt.buffers().weights(),
         &mut gathered,
         crate::frame::CameraMask::ALL,
     )
     .unwrap();
-    assert_eq!(gathered, rt.gathered());
-    assert_eq!(rt.crop(), c.as_slice());
+    assert_eq!(gathered, rt.buffers().gathered());
+    assert_eq!(rt.buffers().crop(), c.as_slice());
     assert_eq!(
-        rt.can_bus(),
+        rt.buffers().can_bus(),
         &can_bus(&images.frame(1).pose, &images.frame(1).motion)
     );
     assert_eq!(rt.last_map(), Some(&out));
@@ -293,7 +295,7 @@ fn degraded_mode_feeds_zeros_and_flags_health() {
     let out = none.step(&images.frame(1)).unwrap().clone();
     assert_eq!(out.health.satellite, SatellitePrior::Missing);
     assert!(out.health.degraded);
-    assert!(none.satellite_bev().iter().all(|&v| v == 0.0));
+    assert!(none.buffers().satellite_bev().iter().all(|&v| v == 0.0));
     assert!(!none.engine().calls.contains(&Stage::SatelliteEncoder));
 
     let mut corrupt = SatMap::new(

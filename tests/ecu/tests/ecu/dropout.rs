@@ -25,10 +25,10 @@ fn every_camera_dropped_in_turn_matches_the_reference() {
             .unwrap()
             .clone();
         for (stage, got) in [
-            ("gathered", map.gathered()),
-            ("camera_bev", map.camera_bev()),
-            ("class_logits", map.logits()),
-            ("points", map.points()),
+            ("gathered", map.buffers().gathered()),
+            ("camera_bev", map.buffers().camera_bev()),
+            ("class_logits", map.buffers().logits()),
+            ("points", map.buffers().points()),
         ] {
             let want = dropout.f32s(&format!("{name}_{stage}"));
             let d = max_abs_diff(got, &want);

@@ -20,10 +20,17 @@ use glam::DVec2;
 use super::cache::{PREFETCH_TILES_PER_STEP, TileCache, TileState};
 use super::crop_bound::{crop_tile_bound, footprint, tile_window};
 use super::crop_window::{Resolved, TileWindow};
-use super::format::{CHANNELS, PackError, RoutePack, TileKey};
-use super::route::{RouteCursor, RouteState, distance_to_route_m};
+use super::error::PackError;
+use super::format::{CHANNELS, TileKey};
+use super::parse::RoutePack;
+use super::route::{RouteCursor, distance_to_route_m};
 use crate::pose::EgoPose;
 use crate::satellite::{Coverage, CropSpec, SatelliteSource};
+
+mod prefetch;
+mod report;
+
+pub use report::{CropFault, CropReport};
 
 /// Colour written where the pack has no verified imagery (black, like the zero padding the
 /// image encoders see).
@@ -32,89 +39,6 @@ pub const FILL_RGB: [u8; 3] = [0, 0, 0];
 /// pack's resolution spans at most 3 x 3 tiles of 256 px at any yaw; 6 x 6 leaves room for
 /// smaller tiles or larger crops.
 pub const MAX_CROP_TILES: usize = 36;
-/// Points sampled ahead along the route per step when choosing tiles to prefetch: every half
-/// tile over the next two tiles. Deeper lookahead outgrows a compressed pack's tile buffer
-/// (16 points, 8 tiles, decoded every tile 46 times over a 100 km replay instead of once).
-const MAX_PREFETCH_SAMPLES: usize = 4;
-
-/// Why a crop could not be attempted (the output is all fill and coverage is `None`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CropFault {
-    /// `out` is not `height_px * width_px * 3` bytes.
-    OutputSize,
-    /// The pose has a non-finite field.
-    PoseNotFinite,
-    /// The crop spec has a zero size or a non-finite or non-positive resolution or origin.
-    BadSpec,
-    /// The crop spans more than [`MAX_CROP_TILES`] tiles.
-    TooManyTiles {
-        /// Tiles in the crop's bounding box.
-        tiles: usize,
-    },
-    /// A compressed pack's tile buffer has fewer tile slots than a crop (plus the step's
-    /// prefetch) needs.
-    TileBuffer {
-        /// Whole tile slots in the buffer.
-        slots: usize,
-        /// Slots needed.
-        needed: usize,
-    },
-}
-
-/// What one crop delivered.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct CropReport {
-    /// Coverage verdict returned through [`SatelliteSource::crop`].
-    pub coverage: Coverage,
-    /// Pixels sampled from verified imagery.
-    pub covered_px: u32,
-    /// Pixels in the crop.
-    pub total_px: u32,
-    /// Corrupt tiles the crop would have sampled (not used).
-    pub corrupt_tiles: u8,
-    /// One of those corrupt tiles, for the log.
-    pub first_corrupt: Option<TileKey>,
-    /// Tiles hashed this step (crop and prefetch); at most
-    /// `MAX_CROP_TILES + PREFETCH_TILES_PER_STEP`.
-    pub verified_tiles: u8,
-    /// Of those, hashed ahead on the route.
-    pub prefetched_tiles: u8,
-    /// Tiles decoded this step (compressed packs: every tile hashed is then decoded).
-    pub decoded_tiles: u8,
-    /// Set when the crop could not be attempted.
-    pub fault: Option<CropFault>,
-    /// Where the route cursor stands after this step (not moved on a fault).
-    pub route: RouteState,
-    /// Route segments the cursor examined this step; at most
-    /// [`super::MAX_ROUTE_SEGMENTS_PER_STEP`] whatever the route's length.
-    pub route_segments_examined: u32,
-}
-
-impl CropReport {
-    const EMPTY: Self = Self {
-        coverage: Coverage::None,
-        covered_px: 0,
-        total_px: 0,
-        corrupt_tiles: 0,
-        first_corrupt: None,
-        verified_tiles: 0,
-        prefetched_tiles: 0,
-        decoded_tiles: 0,
-        fault: None,
-        route: RouteState::Searching,
-        route_segments_examined: 0,
-    };
-
-    /// Covered fraction, thousandths (0..=1000).
-    #[must_use]
-    pub fn covered_permille(&self) -> u16 {
-        if self.total_px == 0 {
-            return 0;
-        }
-        (u64::from(self.covered_px) * 1000 / u64::from(self.total_px)) as u16
-    }
-}
-
 /// The pack-backed satellite source: crop, coverage, tile cache and route-ahead prefetch.
 #[derive(Debug)]
 pub struct PackSource<'a> {
@@ -361,71 +285,6 @@ impl<'a> PackSource<'a> {
             };
         }
         resolved
-    }
-
-    /// Verify up to [`PREFETCH_TILES_PER_STEP`] uncached tiles that crops further along the route
-    /// will need: tiles within the crop's reach of points sampled every half tile over the next
-    /// two tiles of route.
-    fn prefetch(&mut self, pose: &EgoPose, spec: &CropSpec) {
-        let side_m = self.pack.tile_side_m();
-        let capture_m = 0.5 * self.pack.header().corridor_width_m + side_m;
-        let Some(at) = self.route.step(&self.pack, pose.position_m, capture_m) else {
-            return;
-        };
-        let x_far_m = spec
-            .x_min_m
-            .abs()
-            .max((spec.x_min_m + spec.width_px as f64 * spec.gsd_m).abs());
-        let y_far_m = spec
-            .y_min_m
-            .abs()
-            .max((spec.y_min_m + spec.height_px as f64 * spec.gsd_m).abs());
-        let reach_m = libm::hypot(x_far_m, y_far_m);
-        let budget_start = self.cache.verified_this_step();
-        let pack = self.pack;
-        let mut route = self.route;
-        route.walk_ahead(&pack, at, 0.5 * side_m, MAX_PREFETCH_SAMPLES, |p| {
-            self.prefetch_around(p, reach_m, budget_start)
-        });
-        self.route = route;
-    }
-
-    /// Keep the cached tiles within `reach_m` of `p` (mark them used) and verify uncached ones
-    /// while the step's budget lasts and the cache has room beside this step's tiles. Never
-    /// ends the walk (false): every held tile ahead must be marked.
-    fn prefetch_around(&mut self, p: DVec2, reach_m: f64, budget_start: usize) -> bool {
-        let side_m = self.pack.tile_side_m();
-        let lo = ((p - DVec2::splat(reach_m)) / side_m).floor();
-        let hi = ((p + DVec2::splat(reach_m)) / side_m).floor();
-        // The crop itself spans at most MAX_CROP_TILES tiles, so a wider square (or a point off
-        // the i32 tile grid) cannot be a future crop's: skip it rather than loop over it.
-        let span = hi - lo;
-        let grid = f64::from(i32::MAX);
-        if !(span.max_element() < MAX_CROP_TILES as f64
-            && lo.abs().max_element() < grid
-            && hi.abs().max_element() < grid)
-        {
-            return false;
-        }
-        let (tx0, tx1, ty0, ty1) = (lo.x as i32, hi.x as i32, lo.y as i32, hi.y as i32);
-        for ty in ty0..=ty1 {
-            for tx in tx0..=tx1 {
-                let Some(i) = self.pack.find_tile(TileKey::new(tx, ty)) else {
-                    continue;
-                };
-                // Tiles ahead already held are marked used even once the budget is spent, or
-                // the farthest would age out and be fetched again a few steps later.
-                if self.cache.touch(i).is_some()
-                    || self.cache.verified_this_step() - budget_start >= PREFETCH_TILES_PER_STEP
-                {
-                    continue;
-                }
-                // `None`: the cache holds only this step's tiles, nothing more fits ahead; the
-                // walk goes on marking the held ones so that none of them ages out.
-                let _ = self.cache.prefetch(&self.pack, i, self.pixels);
-            }
-        }
-        false
     }
 }
 
