@@ -85,7 +85,7 @@ class Resize2d(torch.nn.Module):
 
 
 def weighted_axis_sum(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
-    """The runtime's native corner-sum kernel (`engine_tract::weighted_sum::WeightedAxisSum`,
+    """The runtime's native corner-sum kernel (`engine_tract::ops::weighted_sum::WeightedAxisSum`,
     which replaces tract's `Mul -> ReduceSum` over a middle axis), bit for bit: the sum over
     `axis` of `a * b` (numpy broadcasting, f32, the axis kept as size 1), each output element
     starting at 0.0 and adding `a[k] * b[k]` for k ascending, a multiply then an add (numpy
@@ -100,7 +100,7 @@ def weighted_axis_sum(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
 
 def bilinear_corner_sum(rows: np.ndarray, x: np.ndarray, y: np.ndarray, attn: np.ndarray,
                         h: int, w: int) -> np.ndarray:
-    """The runtime's native sampler (`engine_tract::bilinear::BilinearCornerSum`, which replaces
+    """The runtime's native sampler (`engine_tract::ops::bilinear::BilinearCornerSum`, which replaces
     the exported graph of `bilinear_gather_sum` from the pixel coordinates on), bit for bit: the
     same f32 operations in the same order as that graph, then `weighted_axis_sum`'s corner sum.
 

@@ -43,7 +43,10 @@ use std::path::{Path, PathBuf};
 use satmap_core::engine::Stage;
 use satmap_core::model_dims::ModelDims;
 
-use opening::{check_trust, read_signature, read, stage_file, verify, parse_digest_file, checked_manifest, checked_stage_entry};
+use opening::{
+    check_trust, checked_manifest, checked_stage_entry, parse_digest_file, read, read_signature,
+    stage_file, verify,
+};
 
 /// File name of the manifest inside a bundle folder.
 pub const MANIFEST_FILE: &str = "manifest.toml";

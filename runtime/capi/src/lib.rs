@@ -29,7 +29,7 @@ pub use map_output::{satmap_check_map_frame, satmap_map_frame};
 pub use runtime::{
     SatmapRuntime, satmap_kernel_family, satmap_last_error, satmap_recalibrate, satmap_reset,
 };
+pub use status::SatmapStatus;
 pub use step::{
     satmap_step, satmap_step_abort, satmap_step_begin, satmap_step_finish, satmap_step_run_next,
 };
-pub use status::SatmapStatus;

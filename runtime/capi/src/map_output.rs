@@ -91,4 +91,3 @@ pub unsafe extern "C" fn satmap_check_map_frame(
         }
     })
 }
-

@@ -64,7 +64,11 @@ const DEAD_MESSAGE: &str = "a call panicked inside the runtime (a bug): this han
                             satmap_destroy it and satmap_create another";
 
 impl SatmapRuntime {
-    pub(crate) fn fail(&mut self, status: SatmapStatus, what: &dyn core::fmt::Display) -> SatmapStatus {
+    pub(crate) fn fail(
+        &mut self,
+        status: SatmapStatus,
+        what: &dyn core::fmt::Display,
+    ) -> SatmapStatus {
         self.message.clear();
         // A message longer than the buffer is cut, never an error.
         let _ = write!(self.message, "{what}");

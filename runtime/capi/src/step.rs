@@ -85,4 +85,3 @@ pub unsafe extern "C" fn satmap_step_abort(rt: *mut SatmapRuntime) -> SatmapStat
         SatmapStatus::Ok
     })
 }
-

@@ -6,7 +6,7 @@
 //! channels, n = output pixels), as the same GEMM through matrixmultiply (ndarray's pure-Rust
 //! kernel, AVX2 + FMA, no AVX-512), and, on an AVX-512 CPU, through the engine's own product:
 //! the whole convolution as the engine plans it (`native_unfold_conv`:
-//! `engine_tract::conv_unfold`, patches gathered into the packed blocks) and the product alone
+//! `engine_tract::ops::conv_unfold`, patches gathered into the packed blocks) and the product alone
 //! on operands packed beforehand (`native_gemm_packed`: `engine_tract::gemm`). FLOPs per call
 //! are `2 m k n` (criterion's "elements"); the group names carry the shape. The `gemm` crate's
 //! columns of docs/perf.md were measured with this file at commit 7174941.
@@ -16,8 +16,8 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use satmap_engine_tract::conv_unfold::unfold_convs;
 use satmap_engine_tract::gemm;
+use satmap_engine_tract::ops::conv_unfold::unfold_convs;
 use tract_nnef::prelude::tract_ndarray::{Array2, linalg::general_mat_mul};
 use tract_nnef::prelude::*;
 use tract_nnef::tract_core::ops::cnn::{Conv, KernelFormat, PaddingSpec, PoolSpec};
@@ -50,7 +50,7 @@ fn conv_plan(ci: usize, co: usize, h: usize, w: usize) -> TractResult<Arc<TypedS
 }
 
 /// The same convolution through the engine's native product
-/// (`engine_tract::conv_unfold::unfold_convs`), as the engine plans it on the AVX-512 tier.
+/// (`engine_tract::ops::conv_unfold::unfold_convs`), as the engine plans it on the AVX-512 tier.
 fn native_plan(ci: usize, co: usize, h: usize, w: usize) -> TractResult<Arc<TypedSimplePlan>> {
     let (model, rewritten) = unfold_convs(conv_model(ci, co, h, w)?)?;
     if rewritten != 1 {

@@ -21,9 +21,12 @@
 //! (`tests/integration/threads.rs` asserts it over a replay).
 //!
 //! Here: [`TractEngine`] (loading every stage, threads, the [`Engine`] calls). Beside it:
-//! `runner` (one stage's plan, state and confined runs), `graph_load` (the checked parse),
-//! [`kernel_family`] (the one rule naming tract's kernels on this CPU), [`rewrite`] (the
-//! load-time passes) and the native ops and kernels they put in the plans.
+//! `runner` (one stage's plan, state and confined runs), [`kernel_family`] (the one rule naming
+//! tract's kernels on this CPU), and three folders whose names say what they hold:
+//! [`graph`] (the checked parse of a stage, and the matching helpers every pass uses), [`ops`]
+//! (the native ops, each with the pass that puts it into a plan), [`passes`] (the driver,
+//! [`passes::rewrite`], and the passes that only reshape tract's own graph); [`gemm`] and
+//! [`pool`] are the product driver and the thread split the ops run on.
 
 #![deny(missing_docs)]
 
@@ -33,34 +36,16 @@ use std::sync::Arc;
 
 use tract_linalg::multithread::{Executor, multithread_tract_scope};
 
-pub mod attention;
-pub mod batched;
-pub mod bilinear;
-pub mod broadcast;
-pub mod contraction;
-pub mod conv_direct;
-pub mod conv_unfold;
-pub mod epilogue;
-pub mod finish;
-pub mod fold;
-pub mod gelu;
 pub mod gemm;
-mod graph_load;
-mod graph_match;
+pub mod graph;
 pub mod kernel_family;
-pub mod layer_norm;
-pub mod linear;
-pub mod max_pool;
-pub mod natural_consts;
-pub mod pointwise;
+pub mod ops;
+pub mod passes;
 pub mod pool;
-pub mod rewrite;
 mod runner;
-pub mod softmax;
 #[cfg(test)]
 mod test_support;
 pub mod vector_state;
-pub mod weighted_sum;
 
 use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
@@ -70,11 +55,11 @@ use satmap_core::engine::{BackendFault, Engine, EngineError, EngineErrorKind, St
 use satmap_core::model_dims::ModelDims;
 
 // The load steps `satmap-translate` runs too, on the host, before it writes a stage.
-pub use graph_load::{HalfArithmetic, parse_stage_graph};
-pub use graph_load::{check_graph_io, engine_error, nnef_model, onnx_model};
-pub(crate) use graph_load::{confined, datum};
+pub use graph::load::{HalfArithmetic, parse_stage_graph};
+pub use graph::load::{check_graph_io, engine_error, nnef_model, onnx_model};
+pub(crate) use graph::load::{confined, datum};
 pub use kernel_family::{KernelFamily, kernel_family};
-pub use rewrite::Rewrites;
+pub use passes::rewrite::Rewrites;
 use runner::{StageRunner, on_engine_threads, panic_message};
 
 /// All five stages of a bundle, loaded into tract, implementing [`Engine`].

@@ -28,7 +28,7 @@ std::thread_local! {
 /// product inside it stays on its thread ([`in_task`]). The plan itself runs on a worker of the
 /// same pool (`on_engine_threads`), so being on a worker does not tell a task from the plan.
 pub(crate) fn as_task<R>(task: impl FnOnce() -> R) -> R {
-    super::vector_state::clear_upper();
+    crate::vector_state::clear_upper();
     let outer = IN_TASK.replace(true);
     let result = task();
     IN_TASK.set(outer);

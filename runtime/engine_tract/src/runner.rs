@@ -42,7 +42,7 @@ impl StageRunner {
         drop(bytes);
         let (model, rewrites) = model
             .into_decluttered()
-            .and_then(rewrite::optimise)
+            .and_then(crate::passes::rewrite::optimise)
             .map_err(engine_err)?;
         let plan = model.into_runnable().map_err(engine_err)?;
         check_graph_io(

@@ -4,7 +4,7 @@
 
 use tract_nnef::internal::*;
 
-use crate::rewrite::{Pass, Rewrites, optimise_before};
+use crate::passes::rewrite::{Pass, Rewrites, optimise_before};
 use crate::{HalfArithmetic, nnef_model};
 use satmap_bundle::Bundle;
 use satmap_core::engine::Stage;

@@ -4,7 +4,7 @@
 //! tract 0.23.9's AVX-512 kernels (its matrix products, `max` for ReLU, `erf` for GELU, `tanh`,
 //! `sigmoid`) return without `vzeroupper`, leaving the upper bits of the vector registers
 //! dirty; every legacy-SSE instruction after them (code compiled for the x86-64 baseline:
-//! tract's own scalar ops, small copies, the patch gathering of [`super::conv_unfold`]) then
+//! tract's own scalar ops, small copies, the patch gathering of [`crate::ops::conv_unfold`]) then
 //! runs far slower until something clears them. Measured on `nano`'s satellite encoder (an
 //! Intel Xeon with AVX-512): gathering the patches of one 256-channel convolution took 4.9 ms
 //! right after a GELU and 0.34 ms after a `vzeroupper`. The engine evaluates each node through

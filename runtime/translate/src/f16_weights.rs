@@ -5,7 +5,7 @@
 //! whole f32 graph translated to f16 (tract's `FloatPrecisionTranslator`; sources, constants
 //! and float operators), half the flash of the f32 form. On a core with f16 arithmetic
 //! (ARMv8.2-A and later) that graph can run as it is; where there is none (x86 here), the engine
-//! translates it back to f32 at load (`engine_tract::graph_load::nnef_model`), and tract's optimiser folds each
+//! translates it back to f32 at load (`engine_tract::graph::load::nnef_model`), and tract's optimiser folds each
 //! widened constant, so the target runs f32 kernels on f16-rounded weights.
 //!
 //! A weight outside f16's range would become an infinity and poison every activation it meets,

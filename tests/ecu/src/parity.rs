@@ -158,7 +158,10 @@ pub fn degraded_frame_matches(engine: impl Fn() -> TractEngine, what: &str) {
     assert!(out.health.degraded);
     assert_eq!(out.health.satellite, SatellitePrior::Missing);
     assert!(map.buffers().satellite_bev().iter().all(|&v| v == 0.0));
-    let d = max_abs_diff(map.buffers().logits(), &f.golden.f32s("degraded_class_logits"));
+    let d = max_abs_diff(
+        map.buffers().logits(),
+        &f.golden.f32s("degraded_class_logits"),
+    );
     assert!(d <= STAGE_TOL, "{what} degraded logits {d:e}");
     let d = max_abs_diff(map.buffers().points(), &f.golden.f32s("degraded_points"));
     assert!(d <= STAGE_TOL, "{what} degraded points {d:e}");

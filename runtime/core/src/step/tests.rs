@@ -5,11 +5,11 @@
 use alloc::vec::Vec;
 
 use super::*;
+use crate::can_bus::can_bus;
 use crate::engine::{BackendFault, EngineError, EngineErrorKind, Stage};
 use crate::frame::{CameraImage, FrameError};
-use crate::pose::EgoPose;
-use crate::can_bus::can_bus;
 use crate::gkt::gather_sum;
+use crate::pose::EgoPose;
 use crate::satellite::{Coverage, CropSpec, FixedCrop, NoSatellite};
 use crate::test_support::{FakeEngine, Images, count_allocations, crop, nuscenes_like};
 

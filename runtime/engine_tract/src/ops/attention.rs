@@ -12,17 +12,17 @@
 //! Bit for bit with the unfused chain: each score and each output value is the same fused
 //! multiply-add chain ([`gemm`]), and a softmax row is computed by the same function over a
 //! row at the same 64-byte alignment (rows of a multiple of 16 keys only), whose exp is
-//! elementwise and whose sum order depends on the row alone ([`super::softmax`]). This module's
+//! elementwise and whose sum order depends on the row alone ([`crate::ops::softmax`]). This module's
 //! tests compare with the unfused chain and with every stage of the committed default bundle.
 
 use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
 
-use super::batched::{BatchedProduct, as_batched};
-use super::gemm::{self, MR, pack};
-use super::graph_match::replace_with_op;
-use super::pool;
-use super::softmax::{RowSoftmax, SumOrder, softmax_block};
+use crate::gemm::{self, MR, pack};
+use crate::graph::matching::replace_with_op;
+use crate::ops::batched::{BatchedProduct, as_batched};
+use crate::ops::softmax::{RowSoftmax, SumOrder, softmax_block};
+use crate::pool;
 
 /// `softmax(scores) . v` with `scores = q . k` over the last axis, per batch (head).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -174,7 +174,7 @@ fn as_attention(
         && scores.n.c == 1
         && scores.m.c == scores.n.len
         && scores.n.len % 16 == 0
-        && scores.m.len >= super::batched::MIN_ROWS
+        && scores.m.len >= crate::ops::batched::MIN_ROWS
         // The probabilities are the values product's A: rows the queries, depth the keys.
         && values.a_input == pv_in.slot
         && values.m.len == scores.m.len
@@ -198,7 +198,7 @@ fn as_attention(
 }
 
 /// Rewrite every `scores -> RowSoftmax -> values` chain of a decluttered `model` (after
-/// [`super::softmax::fuse_softmaxes`]) into a [`FusedAttention`]; returns the model and the
+/// [`crate::ops::softmax::fuse_softmaxes`]) into a [`FusedAttention`]; returns the model and the
 /// number rewritten.
 ///
 /// # Errors
@@ -229,8 +229,8 @@ mod tests {
     //! on the decoder's attention layout (shrunk) and on every stage of the committed default
     //! bundle.
     use super::*;
-    use crate::rewrite::Pass;
-    use crate::softmax::fuse_softmaxes;
+    use crate::ops::softmax::fuse_softmaxes;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, run_optimized};
     use tract_nnef::tract_core::ops::einsum::EinSum;
     use tract_nnef::tract_core::ops::nn::{Softmax, SoftmaxKind};

@@ -12,7 +12,7 @@
 //! whole B of a deep product of few columns, [`gemm::WHOLE_B_MAX`] values at most), the bias
 //! added to the finished sums. Narrower convolutions keep tract's plan (the product's 12-row
 //! tiles would be mostly empty); a 1x1 convolution is a product after decluttering
-//! ([`super::pointwise`] for channel-first maps).
+//! ([`crate::ops::pointwise`] for channel-first maps).
 //!
 //! Bit for bit with tract's im2col: the product sums `k` in the order of tract's own im2col and
 //! of the OIHW weights (input channel, then kernel row, then kernel column) in one fused
@@ -30,9 +30,9 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::{Conv, PoolSpec};
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
-use super::finish::Epilogue;
-use super::gemm::{self, NR, PackedA};
-use super::graph_match::replace_with_op;
+use crate::gemm::{self, NR, PackedA};
+use crate::graph::matching::replace_with_op;
+use crate::ops::finish::Epilogue;
 
 /// The patches of a 2-D convolution of `[1, C, H, W]`, as a `[C * kh * kw, OH * OW]` matrix
 /// would hold them: row `(c * kh + ky) * kw + kx`, zeros where a tap falls in the padding.
@@ -170,7 +170,7 @@ pub struct UnfoldConv {
     pub out_channels: usize,
     /// Whether input and output carry a batch axis of 1 (NCHW; CHW otherwise).
     pub batch_axis: bool,
-    /// The shortcut and ReLU after the bias ([`super::epilogue`]).
+    /// The shortcut and ReLU after the bias ([`crate::passes::epilogue`]).
     pub epilogue: Epilogue,
     weights: Arc<PackedA>,
     bias: Arc<Vec<f32>>,
@@ -244,7 +244,7 @@ impl UnfoldConv {
 }
 
 /// `[1, C, H, W]` with a batch axis, `[C, H, W]` without: the shapes of the channel-first ops
-/// ([`UnfoldConv`], [`super::max_pool::MaxPool2d`]).
+/// ([`UnfoldConv`], [`crate::ops::max_pool::MaxPool2d`]).
 pub(crate) fn with_batch(batch_axis: bool, chw: [usize; 3]) -> TVec<usize> {
     let mut s: TVec<usize> = if batch_axis { tvec![1] } else { tvec![] };
     s.extend(chw);
@@ -395,8 +395,8 @@ mod tests {
     //! (rewritten), on narrow and wide ones (left alone), and on every stage of the committed
     //! default bundle.
     use super::*;
-    use crate::conv_direct;
-    use crate::rewrite::Pass;
+    use crate::passes::conv_direct;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         ConvShape, assert_same_bits, bits, committed_stage_before, conv_model, inputs_of,
         run_optimized,

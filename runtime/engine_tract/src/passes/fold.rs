@@ -111,7 +111,7 @@ mod tests {
     //! committed default bundle.
 
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         assert_same_bits, committed_rewrites, committed_stage_before, inputs_of, run_plain,
     };

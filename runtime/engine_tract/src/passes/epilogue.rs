@@ -11,11 +11,11 @@
 //! (`nano`'s BEV encoder: 1.7 of 19.9 ms). [`fuse_epilogues`] takes them into the
 //! [`UnfoldConv`], [`PointwiseConv`] or [`PackedLinear`] before them: the product's
 //! micro-kernel adds the shortcut and applies the floor to each tile while it is still in
-//! registers ([`super::gemm::Finish`]).
+//! registers ([`crate::gemm::Finish`]).
 //!
 //! Bit for bit: the graph computes `((sum + bias) + shortcut).max(0)`, one f32 step each, and
 //! so does the kernel, in that order; the `max` with tract's bits (its by-scalar `Max` is
-//! Rust's `f32::max` compiled for x86: [`super::gemm::floor`], a NaN giving the floor). This module's
+//! Rust's `f32::max` compiled for x86: [`crate::gemm::floor`], a NaN giving the floor). This module's
 //! tests check ResNet blocks and feed-forward layers built here and every stage of the
 //! committed default bundle against the engine's plan before the pass. (tract's own plan of a
 //! linear layer fuses a `Max` into its product kernel, where a NaN stays NaN; the engine ran
@@ -24,11 +24,11 @@
 
 use tract_nnef::internal::*;
 
-use super::conv_unfold::UnfoldConv;
-use super::finish::Epilogue;
-use super::graph_match::{bin_inputs, only_successor, replace_with_op};
-use super::linear::PackedLinear;
-use super::pointwise::PointwiseConv;
+use crate::graph::matching::{bin_inputs, only_successor, replace_with_op};
+use crate::ops::conv_unfold::UnfoldConv;
+use crate::ops::finish::Epilogue;
+use crate::ops::linear::PackedLinear;
+use crate::ops::pointwise::PointwiseConv;
 
 /// The native products that take an [`Epilogue`].
 enum Finishable<'a> {
@@ -142,12 +142,12 @@ mod tests {
     //! stage of the committed default bundle.
     use super::*;
     use crate::gemm;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         ConvShape, assert_pass_keeps_stage_bits, bits, conv_model, linear_model, on_two_threads,
         run_optimized,
     };
-    use crate::{conv_unfold, linear, pointwise};
+    use crate::{ops::conv_unfold, ops::linear, ops::pointwise};
     use tract_nnef::tract_core::ops::math;
 
     /// `(model, inputs)` (one output) with, after its output, `Add(y, shortcut)` (the shortcut

@@ -78,7 +78,7 @@ mod tests {
     //! bit for bit.
 
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         assert_same_bits, bits, committed_stage_before, inputs_of, run_plain,
     };

@@ -17,14 +17,16 @@
 //! ([`natural_consts`]). Every rewrite computes its graph's values bit for bit (each module's
 //! tests) but on the stems tract would run direct spatial: [`conv_direct`], and [`conv_unfold`]
 //! on a native tier, sum the same products in tract's im2col order instead. The matching
-//! helpers the passes share are in [`super::graph_match`]: this driver imports the passes, the
+//! helpers the passes share are in [`crate::graph::matching`]: this driver imports the passes, the
 //! passes never import it (their tests do, to stop before them).
 
 use tract_nnef::prelude::*;
 
-use crate::{
-    attention, batched, bilinear, broadcast, contraction, conv_direct, conv_unfold, epilogue, fold,
-    gelu, gemm, layer_norm, linear, max_pool, natural_consts, pointwise, softmax, weighted_sum,
+use super::{contraction, conv_direct, epilogue, fold, natural_consts};
+use crate::gemm;
+use crate::ops::{
+    attention, batched, bilinear, broadcast, conv_unfold, gelu, layer_norm, linear, max_pool,
+    pointwise, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised

@@ -12,10 +12,10 @@
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
-use super::finish::Epilogue;
-use super::gemm::{self, MR, PackedB};
-use super::graph_match::{const_operand, only_successor, replace_with_op};
-use super::pool;
+use crate::gemm::{self, MR, PackedB};
+use crate::graph::matching::{const_operand, only_successor, replace_with_op};
+use crate::ops::finish::Epilogue;
+use crate::pool;
 
 /// Tokens (rows of the product) from which a linear layer runs natively.
 pub const MIN_ROWS: usize = 8;
@@ -27,7 +27,7 @@ pub struct PackedLinear {
     pub input: TVec<usize>,
     /// Outputs a token.
     pub n: usize,
-    /// The residual `Add` and ReLU after the bias ([`super::epilogue`]).
+    /// The residual `Add` and ReLU after the bias ([`crate::passes::epilogue`]).
     pub epilogue: Epilogue,
     weights: Arc<PackedB>,
     bias: Option<Arc<Vec<f32>>>,
@@ -159,7 +159,7 @@ struct Layer {
 }
 
 /// An f32 [`EinSum`] node of one activation (concrete shape) and one constant rank-2 matrix:
-/// what a linear layer ([`as_layer`]) and a 1x1 convolution ([`super::pointwise`]) are before
+/// what a linear layer ([`as_layer`]) and a 1x1 convolution ([`crate::ops::pointwise`]) are before
 /// their axes are read.
 pub(crate) struct ConstProduct<'a> {
     /// The op.
@@ -322,7 +322,7 @@ mod tests {
     //! either way round, with and without a bias, one and two leading axes) and on every stage
     //! of the committed default bundle.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, linear_model, run_optimized};
     use tract_nnef::tract_core::ops::binary::TypedBinOp;
 

@@ -358,7 +358,7 @@ mod tests {
     //! against their documented folds, and the rewrite's selection.
 
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         assert_same_bits, committed_rewrites, committed_stage_before, inputs_of, run_optimized,
     };

@@ -27,10 +27,10 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::MaxPool;
 use tract_nnef::tract_core::ops::nn::DataFormat;
 
-use super::conv_unfold::{Unfold, with_batch};
-use super::gemm;
-use super::graph_match::replace_with_op;
-use super::pool;
+use crate::gemm;
+use crate::graph::matching::replace_with_op;
+use crate::ops::conv_unfold::{Unfold, with_batch};
+use crate::pool;
 
 /// A 2-D max pooling of `[1, C, H, W]` or `[C, H, W]` f32 (see the module doc).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -219,7 +219,7 @@ mod tests {
     //! odd maps, wide strides, dilation, windows wholly in the padding, signed zeros and NaNs;
     //! and every stage of the committed default bundle.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized};
     use tract_nnef::tract_core::ops::cnn::{PaddingSpec, PoolSpec};
 

@@ -13,9 +13,9 @@
 
 use tract_nnef::internal::*;
 
-use super::gemm::{self, MR, NR, pack};
-use super::linear::f32_einsum;
-use super::pool;
+use crate::gemm::{self, MR, NR, pack};
+use crate::ops::linear::f32_einsum;
+use crate::pool;
 
 /// Rows from which a product runs natively (fewer: tract's matrix-vector kernels, another sum
 /// order).
@@ -339,7 +339,7 @@ mod tests {
     //! decoder and the Swin windows (shapes shrunk), and on every stage of the committed
     //! default bundle.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized};
     use tract_nnef::tract_core::ops::einsum::EinSum;
 

@@ -11,7 +11,7 @@
 //! 2.5-3.7), an m the matmul tiles mostly waste: the pass takes convolutions of
 //! [`MIN_OUTPUT_CHANNELS`] or more.
 //!
-//! On the AVX-512 tier [`conv_unfold`](super::conv_unfold) runs first and takes every stem
+//! On the AVX-512 tier [`conv_unfold`](crate::ops::conv_unfold) runs first and takes every stem
 //! itself, `test`'s 8-channel one too (same summation order as this pass's im2col, faster there
 //! than the direct kernel: 1.1-1.3 against 2.9 ms); this pass takes the wide ones on the other
 //! tiers.

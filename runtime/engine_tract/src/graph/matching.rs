@@ -1,6 +1,6 @@
 //! Matching and patching helpers every load-time rewrite uses: the one patch that wires a
 //! native op in place of a node, and the tests a fused chain makes of its nodes. A leaf: the
-//! driver ([`super::rewrite`]) imports the passes, the passes import this.
+//! driver ([`crate::passes::rewrite`]) imports the passes, the passes import this.
 
 use tract_nnef::prelude::*;
 use tract_nnef::tract_core::ops::binary::TypedBinOp;

@@ -380,7 +380,7 @@ mod tests {
     //! every stage of the committed default bundle, both bit for bit.
 
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         assert_same_bits, bits, committed_rewrites, committed_stage_before, inputs_of, run_plain,
     };

@@ -3,10 +3,10 @@
 //!
 //! `satmap_ref.sampling.bilinear_gather_sum` exports as ~30 element-wise nodes over
 //! `[N, heads, 4 x points]` (four-way concats of the corners, clamps, comparisons, a tile of the
-//! attention weights, casts) that end in the corner sum [`super::weighted_sum`] already runs
+//! attention weights, casts) that end in the corner sum [`crate::ops::weighted_sum`] already runs
 //! natively. tract runs each of them as a separate pass over a fresh tensor: 30 of `test`'s 40
 //! ms `bev_query` after the row softmax. At load, [`fuse_bilinear_samplers`] (`pattern.rs`)
-//! recognises that subgraph above every gathered [`super::weighted_sum::WeightedAxisSum`] and
+//! recognises that subgraph above every gathered [`crate::ops::weighted_sum::WeightedAxisSum`] and
 //! replaces it with [`BilinearCornerSum`] (here), which reads `x`, `y` (pixel coordinates,
 //! `loc * size - 0.5`) and the attention weights once per point and keeps every corner in
 //! registers.
@@ -147,7 +147,7 @@ impl EvalOp for BilinearCornerSum {
                     out.par_chunks_mut(chunk_len)
                         .enumerate()
                         .try_for_each(|(i, chunk)| {
-                            super::vector_state::clear_upper();
+                            crate::vector_state::clear_upper();
                             task((i, chunk))
                         })
                 })?,
@@ -189,12 +189,12 @@ mod tests {
     //! rewrite against the unfused graph of the committed default bundle, both bit for bit.
 
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::ops::weighted_sum::WeightedAxisSum;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         assert_same_bits, bits, committed_rewrites, committed_stage_before, golden_tensor,
         inputs_of, kernel_golden, run_optimized,
     };
-    use crate::weighted_sum::WeightedAxisSum;
     use satmap_core::engine::Stage;
 
     #[test]

@@ -2,7 +2,7 @@
 //!
 //! After decluttering, a 1x1 convolution of a `[1, C, H, W]` (or `[C, H, W]`) map is an
 //! `EinSum` of constant weights `[C_out, C]` and the map, contracting its channel axis,
-//! usually followed by an `Add` of a constant bias `[C_out, 1, 1]`. [`super::linear`] takes
+//! usually followed by an `Add` of a constant bias `[C_out, 1, 1]`. [`crate::ops::linear`] takes
 //! products whose contracted axis is last (tokens x features); these contract the channel axis,
 //! so tract kept them: ResNet-50's bottleneck projections ran through tract's product at 28-60
 //! GFLOP/s (`paper`'s image encoder: half of its 876 ms, with 86 ms of tract packing the map)
@@ -28,11 +28,11 @@ use tract_nnef::internal::*;
 
 use tract_nnef::tract_core::ops::Downsample;
 
-use super::conv_unfold::{MIN_OUTPUT_CHANNELS, Unfold, UnfoldConv};
-use super::finish::Epilogue;
-use super::gemm::{self, NR, PackedA};
-use super::graph_match::replace_with_op;
-use super::linear::{ConstProduct, bias_after, const_product};
+use crate::gemm::{self, NR, PackedA};
+use crate::graph::matching::replace_with_op;
+use crate::ops::conv_unfold::{MIN_OUTPUT_CHANNELS, Unfold, UnfoldConv};
+use crate::ops::finish::Epilogue;
+use crate::ops::linear::{ConstProduct, bias_after, const_product};
 
 /// Pixels (columns of the product) from which a 1x1 convolution runs natively: one B panel.
 pub const MIN_PIXELS: usize = NR;
@@ -47,7 +47,7 @@ pub struct PointwiseConv {
     pub output: TVec<usize>,
     /// Output channels, input channels, pixels.
     pub mkn: [usize; 3],
-    /// The shortcut and ReLU after the bias ([`super::epilogue`]).
+    /// The shortcut and ReLU after the bias ([`crate::passes::epilogue`]).
     pub epilogue: Epilogue,
     weights: Arc<PackedA>,
     bias: Option<Arc<Vec<f32>>>,
@@ -347,7 +347,7 @@ mod tests {
     //! and without the batch axis, with a bias, wide and narrow maps) and on every stage of the
     //! committed default bundle.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{
         ConvShape, assert_pass_keeps_stage_bits, bits, conv_model, run_optimized,
     };

@@ -1,5 +1,5 @@
 //! Products of an activation and a constant that contract several axes at once, reshaped into
-//! the one-axis linear layers [`super::linear`] takes.
+//! the one-axis linear layers [`crate::ops::linear`] takes.
 //!
 //! The attention output projections contract heads and head width together: the decoder's
 //! `mak,nak->mn` (`[2000, 8, 32]` against `[256, 8, 32]` in `nano`), bev_query's `mbak,nbk->mn`
@@ -18,7 +18,7 @@ use tract_nnef::tract_core::axes::AxesMapping;
 use tract_nnef::tract_core::ops::change_axes::AxisOp;
 use tract_nnef::tract_core::ops::einsum::EinSum;
 
-use super::linear::f32_einsum;
+use crate::ops::linear::f32_einsum;
 
 /// What one einsum becomes: the activation's input, its reshapes, the constant, the product.
 struct Plan {
@@ -186,7 +186,7 @@ mod tests {
     //! The rewrite against tract's plan of the same product, bit for bit, on the three forms
     //! of our graphs and on every stage of the committed default bundle; forms it must leave.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, run_optimized};
 
     fn product(expr: &str, x: &[usize], w: &[usize]) -> (TypedModel, TVec<TValue>) {
@@ -223,8 +223,8 @@ mod tests {
             assert_eq!(got[0].shape(), want[0].shape(), "{expr}");
             assert_eq!(bits(&got[0]), bits(&want[0]), "{expr}");
             // And then the linear layer pass takes it.
-            let (linear, taken) = super::super::linear::native_linears(merged).unwrap();
-            if super::super::gemm::tier().is_some() {
+            let (linear, taken) = crate::ops::linear::native_linears(merged).unwrap();
+            if crate::gemm::tier().is_some() {
                 assert_eq!(taken, 1, "{expr}");
                 let native = run_optimized(linear, &inputs);
                 assert_eq!(bits(&native[0]), bits(&want[0]), "{expr} native");

@@ -17,8 +17,8 @@ use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::element_wise::ElementWiseOp;
 
-use super::graph_match::{bin_inputs, const_operand, only_successor, replace_with_op};
-use super::pool;
+use crate::graph::matching::{bin_inputs, const_operand, only_successor, replace_with_op};
+use crate::pool;
 
 /// Values a task computes at once: its tanh inputs stay in L1 between the three steps.
 const BLOCK_VALUES: usize = 1024;
@@ -73,7 +73,7 @@ impl TanhGelu {
         }
         // tract's AVX-512 tanh leaves the vector registers dirty: the loop below (baseline SSE)
         // ran several times slower after it (`vector_state`).
-        super::vector_state::clear_upper();
+        crate::vector_state::clear_upper();
         for (x, &t) in xs.iter_mut().zip(arg.iter()) {
             *x = (*x * (t + one)) * half;
         }
@@ -283,7 +283,7 @@ mod tests {
     //! subnormal to past tanh's saturation, on one and two threads; chains it must leave alone;
     //! and every stage of the committed default bundle.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized};
     use tract_nnef::tract_core::ops::math;
 

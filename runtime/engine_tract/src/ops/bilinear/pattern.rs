@@ -7,7 +7,7 @@ use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::change_axes::AxisOp;
 
 use super::BilinearCornerSum;
-use crate::weighted_sum::WeightedAxisSum;
+use crate::ops::weighted_sum::WeightedAxisSum;
 
 /// The node behind `o` when its op is named `name` (tract's op names: `Mul`, `Add`, `Floor`...).
 fn node_named<'m>(model: &'m TypedModel, o: OutletId, name: &str) -> Option<&'m TypedNode> {

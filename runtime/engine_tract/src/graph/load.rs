@@ -140,7 +140,7 @@ pub(crate) fn confined<T>(
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
         Err(BundleError::Engine {
             stage: stage.name(),
-            message: format!("tract panicked: {}", super::panic_message(&*panic)),
+            message: format!("tract panicked: {}", crate::panic_message(&*panic)),
         })
     })
 }

@@ -17,9 +17,9 @@ use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::nn::{Reduce, Reducer, RmsNorm};
 
-use super::gemm;
-use super::graph_match::{bin_inputs as bin, const_operand, only_successor, replace_with_op};
-use super::pool;
+use crate::gemm;
+use crate::graph::matching::{bin_inputs as bin, const_operand, only_successor, replace_with_op};
+use crate::pool;
 
 /// Rows a task normalises at least (the pool's dispatch against a row of a few dozen values).
 const ROWS_PER_TASK: usize = 64;
@@ -75,7 +75,7 @@ impl LayerNorm {
             }
             rms(yr, self.eps);
             // tract's kernels here are AVX-512 and leave the upper bits dirty (`vector_state`).
-            super::vector_state::clear_upper();
+            crate::vector_state::clear_upper();
             for ((v, &g), &b) in yr.iter_mut().zip(&self.gamma).zip(&self.beta) {
                 *v = *v * g + b;
             }
@@ -260,7 +260,7 @@ mod tests {
     //! the kernel's alignment; wide), on one and two threads; chains it must leave alone; and every
     //! stage of the committed default bundle.
     use super::*;
-    use crate::rewrite::Pass;
+    use crate::passes::rewrite::Pass;
     use crate::test_support::{assert_pass_keeps_stage_bits, bits, on_two_threads, run_optimized};
     use tract_nnef::tract_core::ops::math;
 

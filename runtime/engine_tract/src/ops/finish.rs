@@ -1,12 +1,12 @@
 //! What a native product does to its finished sums besides the bias ([`Epilogue`]): the
-//! description the ops that run the native product carry ([`super::conv_unfold::UnfoldConv`],
-//! [`super::pointwise::PointwiseConv`], [`super::linear::PackedLinear`]) and the pass that
-//! fills it in ([`super::epilogue`]) sets. A leaf: it imports the product and tract only, so the
+//! description the ops that run the native product carry ([`crate::ops::conv_unfold::UnfoldConv`],
+//! [`crate::ops::pointwise::PointwiseConv`], [`crate::ops::linear::PackedLinear`]) and the pass that
+//! fills it in ([`crate::passes::epilogue`]) sets. A leaf: it imports the product and tract only, so the
 //! ops and the pass that mutates them do not import each other both ways.
 
 use tract_nnef::internal::*;
 
-use super::gemm;
+use crate::gemm;
 
 /// The steps a native convolution takes after its bias.
 #[derive(Clone, Copy, Debug, Default)]
