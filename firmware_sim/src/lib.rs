@@ -1,3 +1,7 @@
+//! `satmap-sim` (host): the harness (replay, arena, report), synthetic worlds, the evaluator,
+//! pictures, route-pack builder and the CLI. May import: `satmap-runtime` (with `onnx`),
+//! `satmap-recording`, `satmap-layout`.
+//!
 //! Host-side simulation harness and tools for the SatMap ECU runtime.
 //!
 //! `cli` holds one module per `satmap-sim` subcommand (arguments + entry point); the other

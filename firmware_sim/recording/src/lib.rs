@@ -1,3 +1,6 @@
+//! `satmap-recording` (host): MCAP recordings, read and written. May import: no SatMap crate (it
+//! knows frames as plain data).
+//!
 //! MCAP recordings of drives, the format perception teams record and view in (ROS 2's bag
 //! format, Foxglove's native file).
 //!

@@ -1,3 +1,6 @@
+//! `satmap-core-check` (no_std): the core end to end on golden frame 0, with the digests every
+//! target must reproduce. May import: `satmap-runtime` without features (the core).
+//!
 //! The no_std core of the SatMap runtime run end to end on golden frame 0
 //! (`models/golden/test/frame_000.safetensors`, embedded), with the digests every target must
 //! reproduce. One function, [`run`], three callers: this crate's host test (x86-64 with std),

@@ -1,3 +1,6 @@
+//! `satmap-layout` (host): parses and checks `memory_layout.toml`; `runtime/core/build.rs` turns it
+//! into the core's constants. May import: no SatMap crate.
+//!
 //! `memory_layout.toml`: the runtime's memory map, like a linker script's `memory.x`.
 //!
 //! The file names every buffer the runtime holds (shape, dtype, bytes), the arena the graph

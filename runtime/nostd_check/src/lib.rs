@@ -1,3 +1,6 @@
+//! `satmap-nostd-check` (no_std staticlib): links the core without std. May import:
+//! `satmap-core-check`.
+//!
 //! no_std canary: links the satmap-runtime core through the core check (`satmap-core-check`:
 //! look-up table, gather-sum kernel, CAN-bus vector, frame checks, decode, map-frame wire, route
 //! pack, tile decode) into a `staticlib` with its own `#[panic_handler]` and a TLSF global

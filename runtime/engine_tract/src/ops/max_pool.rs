@@ -9,12 +9,9 @@
 //! kernel columns at every column (contiguous passes), kept at the stride's columns, then per
 //! output row the maximum of the kernel rows' results.
 //!
-//! Bit for bit: tract folds each window from `f32::MIN`, kernel row by kernel row and column by
-//! column, replacing the running value only by a strictly greater tap; so the result is the
-//! first tap, in that order, of the greatest value (a later `+0.0` does not replace a `-0.0`; a
-//! NaN never replaces anything), and a window wholly in the padding gives `f32::MIN`. The
-//! maximum of the rows' maxima, with the same rule, is that same first tap: the separable
-//! order gives tract's bits. This module's tests check them against tract's plan, signed zeros
+//! Bit for bit: the kernel (`satmap_kernels::pooling`, whose doc states the rule) folds each
+//! window in tract's order with tract's strictly-greater rule, so the separable order gives
+//! tract's bits. This module's tests check them against tract's plan, signed zeros
 //! and NaNs included, and on every stage of the committed default bundle.
 //!
 //! Not rewritten: NCHW 2 x 2 windows without dilation. tract 0.23.9 has a path of its own for
@@ -26,6 +23,8 @@
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::cnn::MaxPool;
 use tract_nnef::tract_core::ops::nn::DataFormat;
+
+use satmap_kernels::pooling::{PoolWindow, max_pool_plane};
 
 use crate::gemm;
 use crate::graph::matching::replace_with_op;
@@ -42,60 +41,17 @@ pub struct MaxPool2d {
     pub batch_axis: bool,
 }
 
-/// The running maximum `acc` and a tap `v`, as tract folds them: `v` replaces `acc` only when
-/// strictly greater (compiles to one `max` instruction, whose operand order is this rule).
-#[inline(always)]
-fn fold(acc: f32, v: f32) -> f32 {
-    if acc < v { v } else { acc }
-}
-
 impl MaxPool2d {
-    /// Input columns a kernel row's horizontal pass covers: `(OW - 1) * SW + 1`.
-    fn span(&self) -> usize {
-        (self.window.output[1] - 1) * self.window.strides[1] + 1
-    }
-
-    /// One channel: `plane` (`H x W`) into `out` (`OH x OW`), with `rows` (`H x OW`: each input
-    /// row's maximum over the kernel columns at the output columns) and `full` ([`Self::span`]
-    /// values) as scratch.
-    fn pool_plane(&self, plane: &[f32], out: &mut [f32], rows: &mut [f32], full: &mut [f32]) {
+    /// One channel plane's windows, as the kernel takes them.
+    fn plane_window(&self) -> PoolWindow {
         let [_, h, w] = self.window.input;
-        let [kh, kw] = self.window.kernel;
-        let [sy, sx] = self.window.strides;
-        let [dy, dx] = self.window.dilations;
-        let [pt, pl] = self.window.pad_before;
-        let [oh, ow] = self.window.output;
-        for (irow, row) in plane.chunks_exact(w).zip(rows.chunks_exact_mut(ow)).take(h) {
-            full.fill(f32::MIN);
-            for kx in 0..kw {
-                // Input column of span column x: x + off, kept inside the row.
-                let off = (kx * dx) as isize - pl as isize;
-                let lo = (-off).max(0) as usize;
-                let hi = (w as isize - off).clamp(0, full.len() as isize) as usize;
-                if lo >= hi {
-                    continue;
-                }
-                let src = &irow[(lo as isize + off) as usize..][..hi - lo];
-                for (a, &v) in full[lo..hi].iter_mut().zip(src) {
-                    *a = fold(*a, v);
-                }
-            }
-            for (r, &v) in row.iter_mut().zip(full.iter().step_by(sx)) {
-                *r = v;
-            }
-        }
-        for (oy, o) in out.chunks_exact_mut(ow).enumerate().take(oh) {
-            o.fill(f32::MIN);
-            for ky in 0..kh {
-                let iy = (oy * sy + ky * dy) as isize - pt as isize;
-                if iy < 0 || iy >= h as isize {
-                    continue;
-                }
-                let r = &rows[iy as usize * ow..][..ow];
-                for (a, &v) in o.iter_mut().zip(r) {
-                    *a = fold(*a, v);
-                }
-            }
+        PoolWindow {
+            input: [h, w],
+            kernel: self.window.kernel,
+            strides: self.window.strides,
+            dilations: self.window.dilations,
+            pad_before: self.window.pad_before,
+            output: self.window.output,
         }
     }
 }
@@ -138,16 +94,14 @@ impl EvalOp for MaxPool2d {
         // Channels a task: eight tasks in all, split over the pool when worth its dispatch.
         let parallel = pool::worth_threads(c * h * w * self.window.kernel[0]);
         let per_task = c.div_ceil(8).max(1);
-        let (span, plane_out) = (self.span(), oh * ow);
+        let (window, plane_out) = (self.plane_window(), oh * ow);
         let done = pool::on_threads(parallel, ys, per_task * plane_out, |t, outs| {
-            gemm::pack::with_scratch(h * ow + span, |scratch| {
-                let (rows, full) = scratch.split_at_mut(h * ow);
-                for (i, o) in outs.chunks_exact_mut(plane_out).enumerate() {
+            gemm::pack::with_scratch(window.scratch_len(), |scratch| {
+                outs.chunks_exact_mut(plane_out).enumerate().all(|(i, o)| {
                     let ch = t * per_task + i;
-                    self.pool_plane(&xs[ch * h * w..][..h * w], o, rows, full);
-                }
-            });
-            true
+                    max_pool_plane(&window, &xs[ch * h * w..][..h * w], o, scratch)
+                })
+            })
         });
         ensure!(done, "max pooling task failed");
         Ok(tvec!(out.into_tvalue()))

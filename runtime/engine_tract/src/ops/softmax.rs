@@ -12,11 +12,11 @@
 //! output and no pinned digest. Per row `x`: `m = max(x)` (exact in any order); `e[i] =
 //! exp(x[i] - m)` by tract-linalg's `Softmax2` kernel (elementwise, so a block call gives each
 //! value the bits a row call gives it); the sum `s` is added in exactly the lanes and the order
-//! tract's row call adds it ([`SumOrder`]: the map-reduce driver's split of the row at the
+//! tract's row call adds it ([`SumOrder`], in `satmap-kernels`: the map-reduce driver's split of the row at the
 //! kernel's alignment, the kernel's accumulators and its horizontal fold); `y[i] = e[i] * (1 /
 //! s)`, as tract's scale kernel multiplies. The order is known per kernel, by name; on a host
 //! whose kernel is not one of them, or whose kernel disagrees with the model on a probe at load
-//! ([`SumOrder::here`]), nothing is rewritten. Rows never span threads, so the result is the
+//! ([`sum_order_here`]), nothing is rewritten. Rows never span threads, so the result is the
 //! same for any thread count. A row holding NaN comes out all NaN, as tract's does (the NaN
 //! payloads are not pinned).
 
@@ -24,6 +24,9 @@ use tract_linalg::reduce::MapReduce;
 use tract_linalg::routines::Func;
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::nn::{Softmax, SoftmaxKind};
+
+pub(crate) use satmap_kernels::softmax::SumOrder;
+use satmap_kernels::softmax::row_max;
 
 /// Rows are processed in blocks of at least this many values: one exp-kernel call per block
 /// amortises its set-up over short rows, and a block stays in L1.
@@ -34,7 +37,7 @@ const BLOCK_VALUES: usize = 1024;
 pub struct RowSoftmax {
     /// How many trailing axes one row spans (at least one).
     pub trailing: usize,
-    /// How this host's tract softmax adds up a row ([`SumOrder::here`]).
+    /// How this host's tract softmax adds up a row ([`sum_order_here`]).
     pub(crate) order: SumOrder,
 }
 
@@ -108,176 +111,36 @@ pub(crate) fn softmax_block(
     Ok(())
 }
 
-/// The largest value of `row` (exact in any order; NaNs are skipped). Written as compare and
-/// select, which compiles to vector max instructions (`f32::max` does not, for its NaN rule).
-fn row_max(row: &[f32]) -> f32 {
-    let pick = |m: f32, x: f32| if x > m { x } else { m };
-    let mut lanes = [f32::NEG_INFINITY; 8];
-    let chunks = row.chunks_exact(8);
-    let rest = chunks.remainder();
-    for c in chunks {
-        for (l, &x) in lanes.iter_mut().zip(c) {
-            *l = pick(*l, x);
-        }
-    }
-    rest.iter()
-        .fold(lanes.into_iter().fold(f32::NEG_INFINITY, pick), |m, &x| {
-            pick(m, x)
-        })
-}
-
-/// The order in which tract's softmax adds up one row's exponentials, per tract-linalg
-/// `Softmax2` kernel (read off tract-linalg 0.23.9's `x86_64/softmax.rs`, `generic/reduce.rs`
-/// and `frame/element_wise_helper.rs`).
+/// The order of this host's kernel, if known and if it reproduces tract's own softmax bit
+/// for bit on a probe (rows of 1 to 80 values and of 1000, at every alignment the kernel
+/// has); `None` leaves tract's softmax in place.
 ///
-/// The driver splits a row at the kernel's alignment: the values before the first aligned
-/// address (the prefix), the aligned whole kernel widths (the body), the rest (the suffix). The
-/// prefix and the suffix are each staged at the start of a scratch vector padded with values
-/// whose exponential is +0, the body runs in place, and the three kernel results are added in
-/// that order onto 0. One kernel call keeps `accumulators` vectors of `lanes` lanes: value `i`
-/// of the call lands in lane `i % lanes` of accumulator `(i / lanes) % accumulators`; at the end
-/// the accumulators are added pairwise (`(a0 + a1) + (a2 + a3)`) and the lanes are folded. A
-/// padding value adds +0 to a lane, which changes no sum of non-negative values, so it is left
-/// out here.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub(crate) enum SumOrder {
-    /// `SSoftMaxL2Accurate`: one 4-lane accumulator, lanes folded as `(l0 + l1) + (l2 + l3)`;
-    /// 16-byte alignment.
-    Generic4,
-    /// `x86_64_fma_softmax2_f32_32n`: four 8-lane accumulators, lanes folded by halves (upper
-    /// half onto lower: 8 -> 4 -> 2 -> 1); 32-byte alignment.
-    Fma8x4,
-    /// `x86_64_avx512_softmax2_f32_64n`: four 16-lane accumulators, lanes folded by halves
-    /// (`_mm512_reduce_add_ps`: 16 -> 8 -> 4 -> 2 -> 1); 64-byte alignment.
-    Avx512x16x4,
-}
-
-impl SumOrder {
-    /// The order of the kernel tract-linalg names `name`, if it is one this module knows.
-    fn of_kernel(name: &str) -> Option<Self> {
-        match name {
-            "SSoftMaxL2Accurate" => Some(Self::Generic4),
-            "x86_64_fma_softmax2_f32_32n" => Some(Self::Fma8x4),
-            "x86_64_avx512_softmax2_f32_64n" => Some(Self::Avx512x16x4),
-            _ => None,
-        }
-    }
-
-    /// The order of this host's kernel, if known and if it reproduces tract's own softmax bit
-    /// for bit on a probe (rows of 1 to 80 values and of 1000, at every alignment the kernel
-    /// has); `None` leaves tract's softmax in place.
-    ///
-    /// # Errors
-    /// tract-linalg having no `Softmax2` kernel, or tract's softmax failing on the probe.
-    pub(crate) fn here() -> TractResult<Option<Self>> {
-        let Some(order) = Self::of_kernel(Func::Softmax2.map_reduce_f32()?.name()) else {
+/// # Errors
+/// tract-linalg having no `Softmax2` kernel, or tract's softmax failing on the probe.
+pub(crate) fn sum_order_here() -> TractResult<Option<SumOrder>> {
+    let Some(order) = SumOrder::of_kernel(Func::Softmax2.map_reduce_f32()?.name()) else {
+        return Ok(None);
+    };
+    for row_len in (1..=80).chain([1000]) {
+        let rows = 17;
+        let x = probe_values(rows * row_len, row_len as u32);
+        let t = Tensor::from_shape(&[rows, row_len], &x)?;
+        let theirs = Softmax::new(tvec![1], None, SoftmaxKind::Softmax)
+            .eval_out_of_plan(tvec!(t.clone().into_tvalue()))?
+            .context("tract's softmax evaluates out of a plan")?;
+        let ours = RowSoftmax { trailing: 1, order }.softmax(t)?;
+        let a = theirs[0].try_as_plain_ram()?;
+        let b = ours.try_as_plain_ram()?;
+        let same = a
+            .as_slice::<f32>()?
+            .iter()
+            .zip(b.as_slice::<f32>()?)
+            .all(|(p, q)| p.to_bits() == q.to_bits());
+        if !same {
             return Ok(None);
-        };
-        for row_len in (1..=80).chain([1000]) {
-            let rows = 17;
-            let x = probe_values(rows * row_len, row_len as u32);
-            let t = Tensor::from_shape(&[rows, row_len], &x)?;
-            let theirs = Softmax::new(tvec![1], None, SoftmaxKind::Softmax)
-                .eval_out_of_plan(tvec!(t.clone().into_tvalue()))?
-                .context("tract's softmax evaluates out of a plan")?;
-            let ours = RowSoftmax { trailing: 1, order }.softmax(t)?;
-            let a = theirs[0].try_as_plain_ram()?;
-            let b = ours.try_as_plain_ram()?;
-            let same = a
-                .as_slice::<f32>()?
-                .iter()
-                .zip(b.as_slice::<f32>()?)
-                .all(|(p, q)| p.to_bits() == q.to_bits());
-            if !same {
-                return Ok(None);
-            }
-        }
-        Ok(Some(order))
-    }
-
-    /// The kernel's alignment, in bytes (where the driver splits a row).
-    fn align_bytes(self) -> usize {
-        match self {
-            Self::Generic4 => 16,
-            Self::Fma8x4 => 32,
-            Self::Avx512x16x4 => 64,
         }
     }
-
-    /// Values one kernel step takes (the body is a whole number of them).
-    fn nr(self) -> usize {
-        match self {
-            Self::Generic4 => 4,
-            Self::Fma8x4 => 32,
-            Self::Avx512x16x4 => 64,
-        }
-    }
-
-    /// The sum of `row` (already exponentiated, at its real address) in tract's order.
-    pub(crate) fn row_sum(self, row: &[f32]) -> f32 {
-        let nr = self.nr();
-        let prefix = row.as_ptr().align_offset(self.align_bytes()).min(row.len());
-        let body = (row.len() - prefix) / nr * nr;
-        let mut s = 0.0f32;
-        if prefix > 0 {
-            s += self.call(&row[..prefix]);
-        }
-        if body > 0 {
-            s += self.call(&row[prefix..prefix + body]);
-        }
-        if prefix + body < row.len() {
-            s += self.call(&row[prefix + body..]);
-        }
-        s
-    }
-
-    /// One kernel call's sum over `values` (a whole number of steps, or a staged part of one).
-    fn call(self, values: &[f32]) -> f32 {
-        match self {
-            Self::Generic4 => {
-                let l = accumulate::<4, 1>(values)[0];
-                (l[0] + l[1]) + (l[2] + l[3])
-            }
-            Self::Fma8x4 => fold_halves(pairwise(accumulate::<8, 4>(values))),
-            Self::Avx512x16x4 => fold_halves(pairwise(accumulate::<16, 4>(values))),
-        }
-    }
-}
-
-/// `A` accumulators of `W` lanes over `values`, value `i` into lane `i % W` of accumulator
-/// `(i / W) % A`, in ascending order.
-fn accumulate<const W: usize, const A: usize>(values: &[f32]) -> [[f32; W]; A] {
-    let mut acc = [[0.0f32; W]; A];
-    let steps = values.chunks_exact(W * A);
-    let rest = steps.remainder();
-    for step in steps {
-        for (a, part) in acc.iter_mut().zip(step.chunks_exact(W)) {
-            for (s, &v) in a.iter_mut().zip(part) {
-                *s += v;
-            }
-        }
-    }
-    for (i, &v) in rest.iter().enumerate() {
-        acc[i / W][i % W] += v;
-    }
-    acc
-}
-
-/// Four accumulators added lane by lane as `(a0 + a1) + (a2 + a3)`.
-fn pairwise<const W: usize>(acc: [[f32; W]; 4]) -> [f32; W] {
-    std::array::from_fn(|j| (acc[0][j] + acc[1][j]) + (acc[2][j] + acc[3][j]))
-}
-
-/// Lanes folded by halves: the upper half added onto the lower until one lane is left.
-fn fold_halves<const W: usize>(mut lanes: [f32; W]) -> f32 {
-    let mut w = W;
-    while w > 1 {
-        w /= 2;
-        for j in 0..w {
-            lanes[j] += lanes[j + w];
-        }
-    }
-    lanes[0]
+    Ok(Some(order))
 }
 
 /// A fixed pseudo-random spread over [-12, 12): wide enough that the row maxima and the order
@@ -308,7 +171,7 @@ impl TypedOp for RowSoftmax {
 
 /// Rewrite every f32 `Softmax` (not `LogSoftmax`) whose axes are the trailing axes of its input
 /// into [`RowSoftmax`]; returns the model and the number rewritten (0 on a host whose kernel
-/// order is unknown or fails the probe of [`SumOrder::here`]).
+/// order is unknown or fails the probe of [`sum_order_here`]).
 ///
 /// # Errors
 /// tract refusing the patch (an inconsistent model).
@@ -316,7 +179,7 @@ pub fn fuse_softmaxes(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
     // The probe runs once a process; a probe that fails to run counts as a mismatch (tract's
     // softmax stays, which is always right).
     static ORDER: std::sync::OnceLock<Option<SumOrder>> = std::sync::OnceLock::new();
-    let Some(order) = *ORDER.get_or_init(|| SumOrder::here().ok().flatten()) else {
+    let Some(order) = *ORDER.get_or_init(|| sum_order_here().ok().flatten()) else {
         return Ok((model, 0));
     };
     let mut fused = 0;
@@ -365,7 +228,7 @@ mod tests {
     use satmap_core::engine::Stage;
 
     fn order() -> SumOrder {
-        SumOrder::here()
+        sum_order_here()
             .expect("probe")
             .expect("this host's Softmax2 kernel has a known order that passes the probe")
     }

@@ -12,7 +12,8 @@
 //! registers.
 //!
 //! The kernel performs, per query, head and corner-major sample `k = corner * points + point`,
-//! the same f32 operations in the same order as the graph it replaces, so its outputs are bit
+//! (the loop is `satmap_kernels::sampling::bilinear_corner_sums`) the same f32 operations in the
+//! same order as the graph it replaces, so its outputs are bit
 //! for bit those of the unfused graph (a test asserts it on the committed bundle):
 //! `x0 = floor(x)`, `x1 = x0 + 1`, `fx = x - x0`, `gx = 1 - fx` (and the same in y); corner
 //! weights `gx * gy, fx * gy, gx * fy, fx * fy`; `w = (corner_weight * attn) * inside` with
@@ -25,6 +26,7 @@
 use tract_nnef::internal::*;
 
 use rayon::prelude::*;
+use satmap_kernels::sampling::{SamplePoints, SampledMap, bilinear_corner_sums};
 use tract_linalg::multithread::{Executor, current_tract_executor};
 
 mod pattern;
@@ -83,62 +85,25 @@ impl EvalOp for BilinearCornerSum {
             yp.as_slice::<f32>()?,
             ap.as_slice::<f32>()?,
         );
-        let wf = self.w as f32;
-        let (w_max, h_max) = ((self.w - 1) as f32, (self.h - 1) as f32);
-        let plane = (self.h * self.w) as f32;
+        let map = SampledMap {
+            data,
+            h: self.h,
+            w: self.w,
+            dh,
+        };
+        let samples = SamplePoints {
+            x: xs,
+            y: ys,
+            attention: attn,
+            heads,
+            points,
+        };
         let mut out = vec![0.0f32; n * heads * dh];
         let query_len = heads * dh;
-        // One task: QUERIES_PER_TASK queries, each written by its own arithmetic alone, so the
-        // split (and the thread count) cannot change a bit.
         let task = |(t, chunk): (usize, &mut [f32])| -> TractResult<()> {
-            // Per point: x0, x1, y0, y1, gx, fx, gy, fy, attn (reused by the four corners).
-            let mut pts = vec![[0.0f32; 9]; points];
-            for (i, acc_q) in chunk.chunks_exact_mut(query_len).enumerate() {
-                let q = t * QUERIES_PER_TASK + i;
-                for (head, acc) in acc_q.chunks_exact_mut(dh).enumerate() {
-                    let base = (q * heads + head) * points;
-                    let head_off = head as f32 * plane;
-                    for (p, pt) in pts.iter_mut().enumerate() {
-                        let (x, y) = (xs[base + p], ys[base + p]);
-                        let (x0, y0) = (x.floor(), y.floor());
-                        let (fx, fy) = (x - x0, y - y0);
-                        *pt = [
-                            x0,
-                            x0 + 1.0,
-                            y0,
-                            y0 + 1.0,
-                            1.0 - fx,
-                            fx,
-                            1.0 - fy,
-                            fy,
-                            attn[base + p],
-                        ];
-                    }
-                    for corner in 0..4 {
-                        // Corner order of the export: (x0, y0), (x1, y0), (x0, y1), (x1, y1).
-                        let (cx, cy) = (corner & 1, corner >> 1);
-                        for pt in &pts {
-                            let (xc, yc) = (pt[cx], pt[2 + cy]);
-                            let wx = if cx == 0 { pt[4] } else { pt[5] };
-                            let wy = if cy == 0 { pt[6] } else { pt[7] };
-                            let inside = xc >= 0.0 && xc <= w_max && yc >= 0.0 && yc <= h_max;
-                            let wt = ((wx * wy) * pt[8]) * if inside { 1.0 } else { 0.0 };
-                            let xi = xc.max(0.0).min(w_max);
-                            let yi = yc.max(0.0).min(h_max);
-                            let row = ((yi * wf + xi) + head_off) as i64;
-                            ensure!(
-                                (0..rows as i64).contains(&row),
-                                "sample row {row} out of range (0..{rows})"
-                            );
-                            let r = &data[row as usize * dh..][..dh];
-                            for (s, v) in acc.iter_mut().zip(r) {
-                                *s += *v * wt;
-                            }
-                        }
-                    }
-                }
-            }
-            Ok(())
+            let mut corners = vec![[0.0f32; 9]; points];
+            bilinear_corner_sums(&map, &samples, t * QUERIES_PER_TASK, chunk, &mut corners)
+                .map_err(|e| format_err!("sample row {} out of range (0..{})", e.row, e.rows))
         };
         if query_len > 0 {
             let chunk_len = QUERIES_PER_TASK * query_len;

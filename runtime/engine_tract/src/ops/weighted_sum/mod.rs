@@ -16,6 +16,8 @@
 
 use tract_nnef::internal::*;
 
+use satmap_kernels::sampling::{Operand, weighted_axis_sum};
+
 mod pattern;
 pub use pattern::fuse_weighted_sums;
 
@@ -39,27 +41,6 @@ impl Op for WeightedAxisSum {
         "WeightedAxisSum".into()
     }
     op_as_typed_op!();
-}
-
-/// How one operand is read: its offset for outer block `o`, summed index `k`, inner index `i` is
-/// `(o * k_len + k) * inner_len + i`, with `i` dropped when the operand is broadcast over the
-/// inner dims (`inner_len == 1`).
-struct Operand<'a> {
-    data: &'a [f32],
-    inner_len: usize,
-    /// For a gathered operand: the data row of each `(o, k)` row.
-    rows: Option<&'a [i64]>,
-}
-
-impl Operand<'_> {
-    fn row(&self, r: usize) -> &[f32] {
-        let start = match self.rows {
-            // In range: checked against the data before the loop.
-            Some(rows) => rows[r] as usize * self.inner_len,
-            None => r * self.inner_len,
-        };
-        &self.data[start..][..self.inner_len]
-    }
 }
 
 impl EvalOp for WeightedAxisSum {
@@ -148,12 +129,18 @@ impl EvalOp for WeightedAxisSum {
                     inner_len: inner,
                     rows: Some(rows),
                 };
-                weighted_axis_sum(&a, &b, k_len, inner, &mut out);
+                ensure!(
+                    weighted_axis_sum(&a, &b, k_len, inner, &mut out),
+                    "WeightedAxisSum operands shorter than their shapes"
+                );
             }
             None => {
                 let a_owned = owned(&inputs[0])?;
                 let a = plain_operand(&inputs[0], &a_owned, outer * k_len)?;
-                weighted_axis_sum(&a, &b, k_len, inner, &mut out);
+                ensure!(
+                    weighted_axis_sum(&a, &b, k_len, inner, &mut out),
+                    "WeightedAxisSum operands shorter than their shapes"
+                );
             }
         }
         let mut out_shape: TVec<usize> = full.clone();
@@ -175,48 +162,6 @@ fn plain_operand<'a>(
         inner_len: data.len() / rows.max(1),
         rows: None,
     })
-}
-
-/// The fixed-order loop: `out[o, i] = sum_k a[o, k, i] * b[o, k, i]`, k ascending.
-fn weighted_axis_sum(
-    a: &Operand<'_>,
-    b: &Operand<'_>,
-    k_len: usize,
-    inner: usize,
-    out: &mut [f32],
-) {
-    for (o, acc) in out.chunks_exact_mut(inner).enumerate() {
-        for k in 0..k_len {
-            let row = o * k_len + k;
-            let ra = a.row(row);
-            let rb = b.row(row);
-            match (ra.len() == inner, rb.len() == inner) {
-                (true, true) => {
-                    for ((s, x), y) in acc.iter_mut().zip(ra).zip(rb) {
-                        *s += *x * *y;
-                    }
-                }
-                (true, false) => {
-                    let y = rb[0];
-                    for (s, x) in acc.iter_mut().zip(ra) {
-                        *s += *x * y;
-                    }
-                }
-                (false, true) => {
-                    let x = ra[0];
-                    for (s, y) in acc.iter_mut().zip(rb) {
-                        *s += x * *y;
-                    }
-                }
-                (false, false) => {
-                    let p = ra[0] * rb[0];
-                    for s in acc.iter_mut() {
-                        *s += p;
-                    }
-                }
-            }
-        }
-    }
 }
 
 impl TypedOp for WeightedAxisSum {
