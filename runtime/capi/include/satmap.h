@@ -252,40 +252,6 @@ enum SatmapStatus satmap_create_trusted(const struct SatmapRegion *regions,
 // `rt` is NULL or from `satmap_create`, and not used afterwards.
 void satmap_destroy(struct SatmapRuntime *rt);
 
-// Run one whole step on `frame`.
-//
-// # Safety
-// `rt` from `satmap_create`; `frame` and its pointers valid for the call.
-enum SatmapStatus satmap_step(struct SatmapRuntime *rt, const struct SatmapFrame *frame);
-
-// Start a staged step: check `frame`, run nothing. The frame and its pointers must stay valid
-// until `satmap_step_finish` or `satmap_step_abort`.
-//
-// # Safety
-// As [`satmap_step`], with the longer lifetime.
-enum SatmapStatus satmap_step_begin(struct SatmapRuntime *rt, const struct SatmapFrame *frame);
-
-// Run the next slice of the staged step; `frame` is the one given to `satmap_step_begin`.
-// `info` (may be NULL) receives the slice and how many remain.
-//
-// # Safety
-// As [`satmap_step_begin`]; `info` NULL or valid for a write.
-enum SatmapStatus satmap_step_run_next(struct SatmapRuntime *rt,
-                                       const struct SatmapFrame *frame,
-                                       struct SatmapSliceInfo *info);
-
-// Publish the staged step's map.
-//
-// # Safety
-// `rt` from `satmap_create`.
-enum SatmapStatus satmap_step_finish(struct SatmapRuntime *rt);
-
-// Drop the staged step in progress, if any.
-//
-// # Safety
-// `rt` from `satmap_create`.
-enum SatmapStatus satmap_step_abort(struct SatmapRuntime *rt);
-
 // Serialise the last published map frame with its E2E protection (layout in
 // ARCHITECTURE.md, "Protected map frame") into `buf`; `*written` receives its length.
 // `SATMAP_MAX_WIRE_BYTES` always suffices.
@@ -341,6 +307,40 @@ size_t satmap_last_error(const struct SatmapRuntime *rt, char *buf, size_t cap);
 // families, so digests recorded on one ECU are compared with runs of the same family
 // (`examples/c/expected-<family>.txt`). Never NULL; the string lives as long as the program.
 const char *satmap_kernel_family(void);
+
+// Run one whole step on `frame`.
+//
+// # Safety
+// `rt` from `satmap_create`; `frame` and its pointers valid for the call.
+enum SatmapStatus satmap_step(struct SatmapRuntime *rt, const struct SatmapFrame *frame);
+
+// Start a staged step: check `frame`, run nothing. The frame and its pointers must stay valid
+// until `satmap_step_finish` or `satmap_step_abort`.
+//
+// # Safety
+// As [`satmap_step`], with the longer lifetime.
+enum SatmapStatus satmap_step_begin(struct SatmapRuntime *rt, const struct SatmapFrame *frame);
+
+// Run the next slice of the staged step; `frame` is the one given to `satmap_step_begin`.
+// `info` (may be NULL) receives the slice and how many remain.
+//
+// # Safety
+// As [`satmap_step_begin`]; `info` NULL or valid for a write.
+enum SatmapStatus satmap_step_run_next(struct SatmapRuntime *rt,
+                                       const struct SatmapFrame *frame,
+                                       struct SatmapSliceInfo *info);
+
+// Publish the staged step's map.
+//
+// # Safety
+// `rt` from `satmap_create`.
+enum SatmapStatus satmap_step_finish(struct SatmapRuntime *rt);
+
+// Drop the staged step in progress, if any.
+//
+// # Safety
+// `rt` from `satmap_create`.
+enum SatmapStatus satmap_step_abort(struct SatmapRuntime *rt);
 
 #ifdef __cplusplus
 }  // extern "C"

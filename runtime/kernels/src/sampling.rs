@@ -268,7 +268,7 @@ mod tests {
             &op(&b_row, 1),
             3,
             4,
-            &mut vec![0.0; 8]
+            &mut [0.0; 8]
         ));
     }
 
