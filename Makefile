@@ -42,6 +42,7 @@ test:
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --exclude satmap-nostd-check --all-targets -- -D warnings
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --exclude satmap-nostd-check --no-deps
 	cd fuzz && $(CARGO) fmt -- --check && $(CARGO) clippy --all-targets -- -D warnings
 
 # Links the no_std core into a staticlib with its own panic handler: fails if std sneaks in.

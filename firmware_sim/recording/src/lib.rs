@@ -7,7 +7,7 @@
 //! - [`topics`]: the topic-mapping file (topic -> camera index, the pose and motion topics,
 //!   frame ids, the anchor of the pose frame, the assembly tolerance).
 //! - [`read`]: a recording (Foxglove protobuf or ROS 2 CDR) read into frames by time.
-//! - [`write`]: a replayed drive written with the Foxglove schemas.
+//! - [`write`](mod@write): a replayed drive written with the Foxglove schemas.
 //! - [`ros2`]: the ROS 2 messages read, as their CDR layout.
 //! - [`json_schemas`]: our two JSON channels (ego motion, step status).
 //! - [`error`]: the errors, [`RecordingError`] and what a topic is for ([`Role`]).

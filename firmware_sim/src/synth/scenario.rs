@@ -1,5 +1,5 @@
 //! The scenario folder: a drive on disk in the formats real data come in (see `SCENARIO.md`
-//! next to this file), written from a [`SyntheticDrive`] and read back frame by frame.
+//! next to this file), written from a [`SyntheticDrive`](super::drive::SyntheticDrive) and read back frame by frame.
 
 use std::path::{Path, PathBuf};
 

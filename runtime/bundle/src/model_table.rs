@@ -3,8 +3,9 @@
 //! after parsing (`ModelDims::validate`, called by `Bundle::open`), so a TOML error and a value
 //! out of range are told apart.
 
+use satmap_core::calibration::CAMERA_NAMES;
 use satmap_core::capacity::NUM_HEADS;
-use satmap_core::model_dims::{CLASS_NAMES, MANIFEST_CAMERAS, ModelDims};
+use satmap_core::model_dims::{CLASS_NAMES, ModelDims};
 
 /// Raw `[model]` table (see `ARCHITECTURE.md`, "Bundle"); only serde builds it.
 #[derive(serde::Deserialize)]
@@ -57,9 +58,9 @@ impl TryFrom<ModelTable> for ModelDims {
                 t.classes
             ));
         }
-        if t.cameras.iter().map(String::as_str).ne(MANIFEST_CAMERAS) {
+        if t.cameras.iter().map(String::as_str).ne(CAMERA_NAMES) {
             return Err(format!(
-                "cameras {:?} differ from {MANIFEST_CAMERAS:?}",
+                "cameras {:?} differ from {CAMERA_NAMES:?}",
                 t.cameras
             ));
         }

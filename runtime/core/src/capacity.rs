@@ -4,9 +4,6 @@
 //! These are the numbers that `memory_layout.toml` will generate later; keep every such bound
 //! here, in one place, so a build script can replace this file's values without touching code.
 
-/// Cameras in the rig (the model's camera embedding has this many rows).
-pub const MAX_CAMERAS: usize = 6;
-
 /// Map elements a [`crate::map_frame::MapFrame`] can hold (the decode top-k bound).
 pub const MAX_TOP_K: usize = 50;
 

@@ -4,7 +4,8 @@
 //! types that size buffers from them.
 
 use crate::buffers::MemoryError;
-use crate::capacity::{MAX_CAMERAS, layout};
+use crate::calibration::NUM_CAMERAS;
+use crate::capacity::layout;
 use crate::model_dims::ModelDims;
 
 // The tile cache region of the layout must describe the route-pack cache that exists.
@@ -35,8 +36,8 @@ pub const MODEL_REGIONS: [&str; 11] = [
 pub fn region_needs(dims: &ModelDims) -> [(&'static str, usize); 11] {
     let f32s = |n: usize| n.saturating_mul(4);
     let needs = [
-        MAX_CAMERAS.saturating_mul(dims.image_bytes()),
-        f32s(MAX_CAMERAS.saturating_mul(dims.value_len())),
+        NUM_CAMERAS.saturating_mul(dims.image_bytes()),
+        f32s(NUM_CAMERAS.saturating_mul(dims.value_len())),
         crate::gkt::Lut::capacity_bytes(dims),
         f32s(dims.bev_len()),
         f32s(dims.weights_len()),

@@ -21,7 +21,7 @@
 //! (`tests/integration/threads.rs` asserts it over a replay).
 //!
 //! Here: [`TractEngine`] (loading every stage, threads, the [`Engine`] calls). Beside it:
-//! `runner` (one stage's plan, state and confined runs), [`kernel_family`] (the one rule naming
+//! `runner` (one stage's plan, state and confined runs), [`kernel_family`](mod@kernel_family) (the one rule naming
 //! tract's kernels on this CPU), and three folders whose names say what they hold:
 //! [`graph`] (the checked parse of a stage, and the matching helpers every pass uses), [`ops`]
 //! (the native ops, each with the pass that puts it into a plan), [`passes`] (the driver,
@@ -200,7 +200,7 @@ impl TractEngine {
     }
 
     /// What the load-time rewrites put into `stage`'s plan: how many of its ops run as the
-    /// engine's native kernels ([`rewrite`]); all zero for a stage that did not load.
+    /// engine's native kernels ([`rewrite`](crate::passes::rewrite)); all zero for a stage that did not load.
     #[must_use]
     pub fn rewrites(&self, stage: Stage) -> Rewrites {
         self.runners

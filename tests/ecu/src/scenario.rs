@@ -71,7 +71,7 @@ pub fn scenario_path() -> PathBuf {
 }
 
 /// The digests of the committed scenario's maps for this CPU's kernel family
-/// ([`kernel_family`]): `SATMAP_BLESS=1` writes this family's file.
+/// ([`kernel_family`](fn@satmap_runtime::engine_tract::kernel_family)): `SATMAP_BLESS=1` writes this family's file.
 #[must_use]
 pub fn expected_path() -> PathBuf {
     root().join(format!("examples/c/expected-{}.txt", kernel_family()))

@@ -7,9 +7,9 @@
 //! 16k-node chain took 105 s). Signatures ([`super::signature`]) keep strangers' graphs out; this
 //! check bounds what even a signed graph may ask, in one linear pass without recursion:
 //! - the tar: regular files only, plain relative names, `graph.nnef` once and at most
-//!   [`MAX_GRAPH_TEXT_BYTES`], every other entry a `.dat` tensor ([`tensor_file`]: header
+//!   [`MAX_GRAPH_TEXT_BYTES`], every other entry a `.dat` tensor (`tensor_file.rs`: header
 //!   consistent with its bytes, rank <= 8, at most [`MAX_TENSOR_ELEMENTS`]);
-//! - the text ([`text`]): the one header tract writes, no fragment but its properties, one
+//! - the text (`text/`): the one header tract writes, no fragment but its properties, one
 //!   graph of at most [`MAX_STATEMENTS`] statements, brackets nested at most [`MAX_NESTING`]
 //!   deep, calls to allowlisted operators only, attributes allowlisted with their values in
 //!   range (axes inside a rank of 8, strides and sizes >= 1, padding >= 0, no literal beyond

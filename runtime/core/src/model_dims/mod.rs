@@ -5,10 +5,9 @@
 //! y forward, z up). The BEV grid has `bev_h` rows along y (row 0 at the rear) and `bev_w` columns
 //! along x (column 0 at the left).
 
-use crate::calibration::CAMERA_NAMES;
+use crate::calibration::NUM_CAMERAS;
 use crate::capacity::{
-    MAX_CAMERAS, MAX_FEATURES, MAX_KERNEL_POINTS, MAX_QUERIES, MAX_TOP_K, NUM_CLASSES, NUM_HEADS,
-    NUM_POINTS,
+    MAX_FEATURES, MAX_KERNEL_POINTS, MAX_QUERIES, MAX_TOP_K, NUM_CLASSES, NUM_HEADS, NUM_POINTS,
 };
 use crate::pose::Axis;
 use crate::satellite::CropSpec;
@@ -289,12 +288,12 @@ impl ModelDims {
             f32_bytes(
                 features
                     .checked_mul(self.embed_dims)
-                    .and_then(|v| v.checked_mul(MAX_CAMERAS)),
+                    .and_then(|v| v.checked_mul(NUM_CAMERAS)),
             ),
             f32_bytes(queries.checked_mul(self.embed_dims)),
             self.image_h
                 .checked_mul(self.image_w)
-                .and_then(|v| v.checked_mul(3 * MAX_CAMERAS)),
+                .and_then(|v| v.checked_mul(3 * NUM_CAMERAS)),
             self.pad_h
                 .checked_mul(self.pad_w)
                 .and_then(|v| v.checked_mul(3)),
@@ -356,9 +355,6 @@ impl ModelDims {
         }
     }
 }
-
-/// Camera names a manifest must list, in model order (re-exported for manifest checks).
-pub const MANIFEST_CAMERAS: [&str; MAX_CAMERAS] = CAMERA_NAMES;
 
 #[cfg(test)]
 mod tests {

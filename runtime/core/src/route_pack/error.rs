@@ -57,14 +57,14 @@ pub enum PackError {
         codec: u8,
     },
     /// Version 2: a tile's payload offset or length breaks the layout rule (payloads packed
-    /// back to back in index order, each 1..=[`super::format::MAX_PAYLOAD_LEN`] bytes, ending
+    /// back to back in index order, each 1..=[`PackHeader::max_payload_len`](super::PackHeader::max_payload_len) bytes, ending
     /// exactly at the end of the image; raw payloads exactly `tile_size_px^2 * 3`).
     PayloadLayout {
         /// Entry number of the first offending entry.
         entry: u32,
     },
     /// Writer: a tile payload does not hold `tile_size_px^2 * 3` bytes (raw), or is empty or
-    /// longer than [`super::format::MAX_PAYLOAD_LEN`] (compressed).
+    /// longer than [`PackHeader::max_payload_len`](super::PackHeader::max_payload_len) (compressed).
     TilePayloadSize {
         /// Entry number (after sorting).
         entry: u32,

@@ -8,7 +8,7 @@
 //! decoded into a caller-owned tile buffer (`memory_layout.toml`, `region.tile_pixels`) when a
 //! tile is first needed, prefetched two tiles ahead along the route.
 //!
-//! - [`format`]: the byte layout: constants, offsets, the header ([`PackHeader`]).
+//! - [`format`](mod@format): the byte layout: constants, offsets, the header ([`PackHeader`]).
 //! - [`parse`]: the zero-copy parser ([`RoutePack`]) that validates header and index at load.
 //! - [`writer`]: the encoder the host builder and tests use.
 //! - [`error`]: [`PackError`], why an image was refused.

@@ -81,7 +81,7 @@ pub(super) fn blocks(
     true
 }
 
-/// Values of B (every panel over all of `k`) that [`rows_outer`] keeps whole: 1.5 MiB of the
+/// Values of B (every panel over all of `k`) that `rows_outer` keeps whole: 1.5 MiB of the
 /// core's 2 MiB L2.
 pub const WHOLE_B_MAX: usize = 384 * 1024;
 

@@ -104,7 +104,7 @@ pub fn nnef_model(
 
 /// What the engine does with a compiled stage's bytes before it builds a plan: the structural
 /// check, tract's parse and the tensor-size check, with a tract panic caught and named (for
-/// tools and the fuzz harness; [`super::TractEngine::load`] does the same on the way to a plan).
+/// tools and the fuzz harness; [`TractEngine::load`](crate::TractEngine::load) does the same on the way to a plan).
 ///
 /// # Errors
 /// [`BundleError::Graph`] for a rule broken, [`BundleError::Engine`] for tract's refusal or

@@ -289,7 +289,7 @@ fn strided_source(
     Ok(Some((src, unfold, c == 1)))
 }
 
-/// Rewrite every 1x1 convolution of a decluttered `model` (see [`as_pointwise`]) with at least
+/// Rewrite every 1x1 convolution of a decluttered `model` (see `as_pointwise`) with at least
 /// [`MIN_OUTPUT_CHANNELS`] outputs and [`MIN_PIXELS`] pixels into a [`PointwiseConv`], its bias
 /// `Add` taken in; returns the model and the number rewritten.
 ///

@@ -16,7 +16,7 @@
 //! kernel's alignment, the kernel's accumulators and its horizontal fold); `y[i] = e[i] * (1 /
 //! s)`, as tract's scale kernel multiplies. The order is known per kernel, by name; on a host
 //! whose kernel is not one of them, or whose kernel disagrees with the model on a probe at load
-//! ([`sum_order_here`]), nothing is rewritten. Rows never span threads, so the result is the
+//! (`sum_order_here`), nothing is rewritten. Rows never span threads, so the result is the
 //! same for any thread count. A row holding NaN comes out all NaN, as tract's does (the NaN
 //! payloads are not pinned).
 
@@ -171,7 +171,7 @@ impl TypedOp for RowSoftmax {
 
 /// Rewrite every f32 `Softmax` (not `LogSoftmax`) whose axes are the trailing axes of its input
 /// into [`RowSoftmax`]; returns the model and the number rewritten (0 on a host whose kernel
-/// order is unknown or fails the probe of [`sum_order_here`]).
+/// order is unknown or fails the probe of `sum_order_here`).
 ///
 /// # Errors
 /// tract refusing the patch (an inconsistent model).

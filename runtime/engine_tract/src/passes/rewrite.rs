@@ -29,7 +29,7 @@ use crate::ops::{
     pointwise, softmax, weighted_sum,
 };
 
-/// How many native ops the load-time rewrites put into one stage ([`optimise`]); serialised
+/// How many native ops the load-time rewrites put into one stage (`optimise`); serialised
 /// field by field (`satmap-sim bench-stages` reports it).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Rewrites {

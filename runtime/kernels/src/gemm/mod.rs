@@ -1,7 +1,7 @@
 //! The f32 product's micro-kernel: one [`MR`] x [`NR`] tile of C over one block of `k`, from
 //! packed panels ([`pack`]), per tier ([`crate::Tier`]).
 //!
-//! The bits, which [`generic`] defines: each output is `acc = fma(a[k], b[k], acc)` for `k`
+//! The bits, which `generic.rs` defines: each output is `acc = fma(a[k], b[k], acc)` for `k`
 //! ascending, `acc` starting at zero in the first block and at the stored partial sum after it
 //! (an f32 store and load is exact), the chain tract's f32 kernels compute whatever the
 //! blocking; after the last block the finish ([`TileFinish`]) adds the bias, then the
@@ -9,9 +9,9 @@
 //! chain lane by lane (a fused multiply-add is one rounding on every instruction set), so it
 //! gives the same bits.
 //!
-//! The tiers: [`x86_64_avx512`] keeps the whole tile in 24 registers with masked edges; the
+//! The tiers: `x86_64_avx512.rs` keeps the whole tile in 24 registers with masked edges; the
 //! AVX2 and NEON tiers, with 16 and 32 registers, walk the tile in sub-tiles over the same
-//! panels and finish through [`finish_into`] (the finish is a few hundred scalar operations a
+//! panels and finish through `finish_into` (the finish is a few hundred scalar operations a
 //! tile against `kc x 384` multiply-adds).
 
 pub mod pack;

@@ -32,7 +32,7 @@ pub enum CropFault {
 /// What one crop delivered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CropReport {
-    /// Coverage verdict returned through [`SatelliteSource::crop`].
+    /// Coverage verdict returned through [`SatelliteSource::crop`](crate::satellite::SatelliteSource::crop).
     pub coverage: Coverage,
     /// Pixels sampled from verified imagery.
     pub covered_px: u32,
@@ -54,7 +54,7 @@ pub struct CropReport {
     /// Where the route cursor stands after this step (not moved on a fault).
     pub route: RouteState,
     /// Route segments the cursor examined this step; at most
-    /// [`super::MAX_ROUTE_SEGMENTS_PER_STEP`] whatever the route's length.
+    /// [`MAX_ROUTE_SEGMENTS_PER_STEP`](crate::route_pack::route::MAX_ROUTE_SEGMENTS_PER_STEP) whatever the route's length.
     pub route_segments_examined: u32,
 }
 
