@@ -63,8 +63,10 @@ test-rust:
 test-tiers:
 	@if grep -qw avx512f /proc/cpuinfo; then \
 	  echo "SATMAP_KERNEL_TIER=avx2-fma: the engine's passes and the demo digest"; \
-	  engine=$$($(CARGO) test --workspace --exclude satmap-nostd-check --lib --no-run 2>&1 \
-	    | sed -n 's|.*(\(.*/deps/satmap_engine_tract-[0-9a-f]*\))$$|\1|p' | head -n 1); \
+	  built=$$($(CARGO) test --workspace --exclude satmap-nostd-check --lib --no-run 2>&1) \
+	    || { echo "$$built"; exit 1; }; \
+	  engine=$$(echo "$$built" | sed -n 's|.*(\(.*/deps/satmap_engine_tract-[0-9a-f]*\))$$|\1|p' \
+	    | head -n 1); \
 	  test -x "$$engine" || { echo "test-tiers: no satmap-engine-tract test binary"; exit 1; }; \
 	  SATMAP_KERNEL_TIER=avx2-fma "$$engine" && \
 	  SATMAP_KERNEL_TIER=avx2-fma $(CARGO) test --workspace --exclude satmap-nostd-check \

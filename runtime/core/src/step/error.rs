@@ -55,11 +55,13 @@ impl fmt::Display for InitError {
 
 impl core::error::Error for InitError {
     fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        // Each variant's message already holds the inner error's: its source is the inner
+        // error's source, so a printed chain says every message once.
         match self {
-            Self::Dims(e) => Some(e),
-            Self::InvalidCalibration { fault, .. } => Some(fault),
-            Self::Memory(e) => Some(e),
-            Self::InvalidLimits(e) => Some(e),
+            Self::Dims(e) => e.source(),
+            Self::InvalidCalibration { fault, .. } => fault.source(),
+            Self::Memory(e) => e.source(),
+            Self::InvalidLimits(e) => e.source(),
         }
     }
 }
@@ -190,10 +192,11 @@ impl fmt::Display for StepError {
 
 impl core::error::Error for StepError {
     fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        // As `InitError`'s: the message is the inner error's, the source is its source.
         match self {
-            Self::Frame(e) => Some(e),
-            Self::Engine(e) => Some(e),
-            Self::Kernel(e) => Some(e),
+            Self::Frame(e) => e.source(),
+            Self::Engine(e) => e.source(),
+            Self::Kernel(e) => e.source(),
             _ => None,
         }
     }
@@ -223,5 +226,39 @@ impl From<LutCorrupt> for StepError {
             built: e.built,
             found: e.found,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use alloc::string::{String, ToString};
+    use core::error::Error;
+
+    use super::*;
+
+    /// Every message of `e`'s chain, outermost first.
+    fn chain(e: &dyn Error) -> alloc::vec::Vec<String> {
+        let mut out = alloc::vec![e.to_string()];
+        let mut at = e.source();
+        while let Some(s) = at {
+            out.push(s.to_string());
+            at = s.source();
+        }
+        out
+    }
+
+    #[test]
+    fn a_wrapped_error_says_its_message_once() {
+        let step = StepError::from(FrameError::NonFinitePose);
+        assert_eq!(chain(&step), ["ego pose is not finite"]);
+        let init = InitError::from(MemoryError::OutOfMemory { bytes: 64 });
+        assert_eq!(chain(&init), ["cannot reserve a buffer of 64 bytes"]);
+        let init = InitError::from(InvalidLimits {
+            field: "max_sequence_gap",
+        });
+        assert_eq!(
+            chain(&init),
+            ["frame limit `max_sequence_gap` must be positive and not NaN"]
+        );
     }
 }

@@ -37,9 +37,10 @@ impl fmt::Display for LutError {
 
 impl core::error::Error for LutError {
     fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        // The message holds the inner error's: its source is the inner error's source.
         match self {
-            Self::InvalidCalibration { fault, .. } => Some(fault),
-            Self::Memory(e) => Some(e),
+            Self::InvalidCalibration { fault, .. } => fault.source(),
+            Self::Memory(e) => e.source(),
         }
     }
 }
