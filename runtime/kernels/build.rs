@@ -9,6 +9,9 @@
 fn main() {
     println!("cargo::rustc-check-cfg=cfg(satmap_tier_avx512f)");
     println!("cargo::rustc-check-cfg=cfg(satmap_tier_avx2_fma)");
+    println!("cargo::rustc-check-cfg=cfg(satmap_itier_avx2)");
+    println!("cargo::rustc-check-cfg=cfg(satmap_itier_avx_vnni)");
+    println!("cargo::rustc-check-cfg=cfg(satmap_itier_avx512_vnni)");
     let host = std::env::var("HOST").unwrap_or_default();
     let target = std::env::var("TARGET").unwrap_or_default();
     #[cfg(target_arch = "x86_64")]
@@ -18,6 +21,16 @@ fn main() {
         }
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             println!("cargo::rustc-cfg=satmap_tier_avx2_fma");
+        }
+        // The integer product's tiers (src/qgemm).
+        if std::is_x86_feature_detected!("avx2") {
+            println!("cargo::rustc-cfg=satmap_itier_avx2");
+        }
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("avxvnni") {
+            println!("cargo::rustc-cfg=satmap_itier_avx_vnni");
+        }
+        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512vnni") {
+            println!("cargo::rustc-cfg=satmap_itier_avx512_vnni");
         }
     }
     #[cfg(not(target_arch = "x86_64"))]

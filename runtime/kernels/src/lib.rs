@@ -15,6 +15,7 @@
 
 pub mod gemm;
 pub mod pooling;
+pub mod qgemm;
 pub mod sampling;
 pub mod softmax;
 pub mod tier;

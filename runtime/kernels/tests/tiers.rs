@@ -3,6 +3,7 @@
 //! another machine fails here instead of testing the wrong set).
 
 use satmap_kernels::Tier;
+use satmap_kernels::qgemm::IntTier;
 
 #[test]
 fn the_tier_tests_run_where_this_cpu_has_the_tier() {
@@ -25,6 +26,32 @@ fn the_tier_tests_run_where_this_cpu_has_the_tier() {
             if tier.runs_here() { "has" } else { "lacks" },
         );
     }
+    let int_built = [
+        (IntTier::X86_64Avx512Vnni, cfg!(satmap_itier_avx512_vnni)),
+        (IntTier::X86_64AvxVnni, cfg!(satmap_itier_avx_vnni)),
+        (IntTier::X86_64Avx2, cfg!(satmap_itier_avx2)),
+        (IntTier::Aarch64Dotprod, cfg!(target_arch = "aarch64")),
+        (IntTier::Generic, true),
+    ];
+    for (tier, tests_run) in int_built {
+        assert_eq!(
+            tests_run,
+            tier.runs_here(),
+            "the integer {tier} tests are built {} this CPU {} the tier: rebuild here",
+            if tests_run {
+                "to run, but"
+            } else {
+                "ignored, but"
+            },
+            if tier.runs_here() { "has" } else { "lacks" },
+        );
+    }
+    let int_ran: Vec<&str> = int_built
+        .iter()
+        .filter(|(_, on)| *on)
+        .map(|(t, _)| t.name())
+        .collect();
+    eprintln!("integer tiers tested on this CPU: {}", int_ran.join(", "));
     let ran: Vec<&str> = built
         .iter()
         .filter(|(_, on)| *on)

@@ -1,0 +1,199 @@
+//! The integer product (W8A8): int8 activations times int8 weights, summed in i32, finished in
+//! f32 (scale, bias, residual, floor) in the product's one store, per tier ([`IntTier`]).
+//!
+//! The bits, which `generic.rs` defines: each output's integer sum `sum_k a[r][k] * w[k][c]`
+//! is exact in i32 for `k <= MAX_K` (`128 * 128 * MAX_K <= 2^30`), so its order does not matter
+//! and every tier gives the same integer; the finish ([`finish_rows`]) is one portable function
+//! every tier shares: `v = (sum as f32) * scale[c]`, then `+ bias[c]`, then `+ residual`, then
+//! the floor, one f32 operation each. So every tier gives the generic tier's bits, always.
+//!
+//! Both operands are symmetric int8 (zero point 0; see [`quantize`]): no zero-point term
+//! enters the sum. The tiers: AVX-512 VNNI and AVX-VNNI multiply unsigned by signed bytes
+//! (`vpdpbusd`), so they add 128 to each activation (an exclusive or of its sign bit) and
+//! subtract `128 * sum_k w[k][c]` (stored with the packed weights, [`PackedQB::col_sums`]);
+//! AVX2 widens both to i16 and sums pairs (`vpmaddwd`, exact); aarch64 uses the signed dot
+//! product (`sdot`, Armv8.2 `dotprod`).
+
+pub mod pack;
+pub mod quantize;
+mod tier;
+
+#[cfg(target_arch = "aarch64")]
+mod aarch64_dotprod;
+mod generic;
+#[cfg(target_arch = "x86_64")]
+mod x86_64_avx2;
+#[cfg(target_arch = "x86_64")]
+mod x86_64_vnni;
+
+pub use pack::{PackError, PackedQB, padded_k};
+pub use tier::{INT_TIER_ENV, IntTier, IntTierError};
+
+use crate::gemm::floor;
+
+/// Rows of an integer tile (one call of a tier's kernel).
+pub const QMR: usize = 8;
+
+/// Columns of a packed weight panel: one 16-lane vector of i32 sums.
+pub const QNR: usize = 16;
+
+/// The longest summed axis: `128 * 128 * MAX_K <= 2^30`, so no sum of int8 products overflows.
+pub const MAX_K: usize = 1 << 16;
+
+/// The integer sums of one tile: [`QMR`] rows of one [`QNR`]-column panel.
+pub(crate) type IntSums = [[i32; QNR]; QMR];
+
+/// What the product does to its integer sums, in f32, in the order tract's graph computes the
+/// float layer: the dequantisation scale, the bias, a residual, a floor.
+#[derive(Clone, Copy, Debug)]
+pub struct QFinish<'a> {
+    /// One scale per output column: the activation's scale times the column's weight scale.
+    pub scale: &'a [f32],
+    /// One bias per output column.
+    pub bias: Option<&'a [f32]>,
+    /// Values added after the bias, row `r` at `r * ld`: `(values, ld)`, from the band's first row.
+    pub residual: Option<(&'a [f32], usize)>,
+    /// `max(v, floor)` last, with [`floor`]'s bits.
+    pub floor: Option<f32>,
+}
+
+/// A product the slices cannot hold (the caller sizes them: a bug, never input).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum QProductError {
+    /// The tier's instructions are not on this CPU.
+    #[error("integer tier {tier} is not on this CPU")]
+    TierAbsent {
+        /// The tier asked for.
+        tier: IntTier,
+    },
+    /// A slice shorter than the sizes it stands for.
+    #[error("integer product: {what} holds {len} values, {needed} needed")]
+    Short {
+        /// Which operand.
+        what: &'static str,
+        /// Its length.
+        len: usize,
+        /// What the sizes need.
+        needed: usize,
+    },
+}
+
+/// `c[r][col] = finish(sum_k a[r][k] * b[k][col])` for `rows` rows of `a` (row `r` at
+/// `r * padded_k(b.k())`, zeros past `k`), every column of `b`; row `r` of `c` at `r * ldc`.
+///
+/// # Errors
+/// A tier this CPU lacks, or slices shorter than the sizes ([`QProductError`]).
+pub fn product(
+    tier: IntTier,
+    a: &[i8],
+    rows: usize,
+    b: &PackedQB,
+    finish: QFinish<'_>,
+    c: &mut [f32],
+    ldc: usize,
+) -> Result<(), QProductError> {
+    if !tier.runs_here() {
+        return Err(QProductError::TierAbsent { tier });
+    }
+    let (n, kp) = (b.n(), padded_k(b.k()));
+    check("a", a.len(), rows * kp)?;
+    check("scale", finish.scale.len(), n)?;
+    if let Some(bias) = finish.bias {
+        check("bias", bias.len(), n)?;
+    }
+    if rows == 0 || n == 0 {
+        return Ok(());
+    }
+    check("c", c.len(), (rows - 1) * ldc + n)?;
+    if ldc < n {
+        check("ldc", ldc, n)?;
+    }
+    if let Some((res, ld)) = finish.residual {
+        check("residual", res.len(), (rows - 1) * ld + n)?;
+        check("residual ld", ld, n)?;
+    }
+    let mut sums: IntSums = [[0; QNR]; QMR];
+    for r0 in (0..rows).step_by(QMR) {
+        let tile_rows = (rows - r0).min(QMR);
+        let a_tile = &a[r0 * kp..(r0 + tile_rows) * kp];
+        for panel in 0..b.panels() {
+            let lines = b.panel(panel);
+            match tier {
+                IntTier::Generic => generic::tile(a_tile, kp, tile_rows, lines, &mut sums),
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: AVX-512 VNNI is present (`runs_here`); `a_tile` holds `tile_rows`
+                // rows of `kp` and the panel `kp / 4` lines (checked above, `PackedQB`).
+                IntTier::X86_64Avx512Vnni => unsafe {
+                    x86_64_vnni::tile_512(a_tile, kp, tile_rows, lines, &mut sums);
+                },
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: as above, with AVX-VNNI.
+                IntTier::X86_64AvxVnni => unsafe {
+                    x86_64_vnni::tile_256(a_tile, kp, tile_rows, lines, &mut sums);
+                },
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: as above, with AVX2.
+                IntTier::X86_64Avx2 => unsafe {
+                    x86_64_avx2::tile(a_tile, kp, tile_rows, lines, &mut sums);
+                },
+                #[cfg(target_arch = "aarch64")]
+                // SAFETY: as above, with the dot-product instructions.
+                IntTier::Aarch64Dotprod => unsafe {
+                    aarch64_dotprod::tile(a_tile, kp, tile_rows, lines, &mut sums);
+                },
+                // Tiers of another architecture never run here (`runs_here`).
+                #[allow(unreachable_patterns)]
+                _ => return Err(QProductError::TierAbsent { tier }),
+            }
+            if tier.offsets_activations() {
+                let comp = &b.col_sums()[panel * QNR..][..QNR];
+                for row in sums.iter_mut().take(tile_rows) {
+                    for (s, &cs) in row.iter_mut().zip(comp) {
+                        *s = s.wrapping_sub(cs.wrapping_mul(128));
+                    }
+                }
+            }
+            let col0 = panel * QNR;
+            let cols = (n - col0).min(QNR);
+            finish_rows(&sums, (r0, tile_rows), (col0, cols), finish, c, ldc);
+        }
+    }
+    Ok(())
+}
+
+fn check(what: &'static str, len: usize, needed: usize) -> Result<(), QProductError> {
+    if len < needed {
+        Err(QProductError::Short { what, len, needed })
+    } else {
+        Ok(())
+    }
+}
+
+/// The finish of one tile's integer sums into `c`, shared by every tier: scale, bias,
+/// residual, floor, one f32 operation each.
+fn finish_rows(
+    sums: &IntSums,
+    (r0, rows): (usize, usize),
+    (col0, cols): (usize, usize),
+    finish: QFinish<'_>,
+    c: &mut [f32],
+    ldc: usize,
+) {
+    let scale = &finish.scale[col0..][..cols];
+    for (r, row) in sums.iter().enumerate().take(rows) {
+        let out = &mut c[(r0 + r) * ldc + col0..][..cols];
+        for (j, (o, (&s, &sc))) in out.iter_mut().zip(row.iter().zip(scale)).enumerate() {
+            let mut v = s as f32 * sc;
+            if let Some(bias) = finish.bias {
+                v += bias[col0 + j];
+            }
+            if let Some((res, ld)) = finish.residual {
+                v += res[(r0 + r) * ld + col0 + j];
+            }
+            *o = match finish.floor {
+                Some(f) => floor(v, f),
+                None => v,
+            };
+        }
+    }
+}
