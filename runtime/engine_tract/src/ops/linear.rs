@@ -148,14 +148,25 @@ impl TypedOp for PackedLinear {
 }
 
 /// What an [`EinSum`] node is when it is a linear layer.
-struct Layer {
+pub(crate) struct Layer {
     /// The activation.
-    x: OutletId,
+    pub x: OutletId,
     /// Its concrete shape.
-    input: TVec<usize>,
+    pub input: TVec<usize>,
     /// The weights as `[k, n]`, row-major.
-    w: Tensor,
-    n: usize,
+    pub w: Tensor,
+    /// Outputs a token.
+    pub n: usize,
+}
+
+impl Layer {
+    /// Whether the native product takes this layer: at least [`MIN_ROWS`] tokens, two outputs
+    /// and a non-empty `k` (the rule [`native_linears`] and the int8 layers share).
+    pub(crate) fn is_native(&self) -> bool {
+        let k = self.input.last().copied().unwrap_or(0);
+        let rows = self.input.iter().product::<usize>() / k.max(1);
+        rows >= MIN_ROWS && self.n >= 2 && k > 0
+    }
 }
 
 /// An f32 [`EinSum`] node of one activation (concrete shape) and one constant rank-2 matrix:
@@ -213,7 +224,7 @@ pub(crate) fn const_product(
 /// The node `id` as a linear layer: an f32 [`EinSum`] of one activation whose last axis is
 /// summed against a constant rank-2 matrix, every other activation axis kept in place, the
 /// matrix's other axis last in the output.
-fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
+pub(crate) fn as_layer(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     let Some(ConstProduct { es, xi, input, w }) = const_product(model, id)? else {
         return Ok(None);
     };
@@ -284,11 +295,10 @@ pub fn native_linears(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
         let Some(layer) = as_layer(&model, id)? else {
             continue;
         };
-        let k = *layer.input.last().unwrap_or(&0);
-        let rows = layer.input.iter().product::<usize>() / k.max(1);
-        if rows < MIN_ROWS || layer.n < 2 || k == 0 {
+        if !layer.is_native() {
             continue;
         }
+        let k = *layer.input.last().unwrap_or(&0);
         // `[n]`, or any rank up to the output's with ones before `n`.
         let (rank, n) = (layer.input.len(), layer.n);
         let bias = bias_after(&model, id, |shape| {

@@ -16,5 +16,6 @@ pub mod layer_norm;
 pub mod linear;
 pub mod max_pool;
 pub mod pointwise;
+pub mod quant_linear;
 pub mod softmax;
 pub mod weighted_sum;

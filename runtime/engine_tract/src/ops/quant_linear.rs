@@ -1,0 +1,330 @@
+//! Linear layers in integer arithmetic (W8A8), and the probes a calibration run reads their
+//! activations' ranges with.
+//!
+//! [`QuantLinear`]: the activation quantised per tensor with the scale its calibrated range
+//! gives (symmetric int8, [`satmap_kernels::qgemm::quantize`]), the weights per output column
+//! at load (an int8 bundle's weights come back as the int8 values it stores), the product
+//! summed in i32 on the integer tier this CPU has ([`IntTier`]) and finished in the same store:
+//! `sum * (activation scale * column scale) + bias`. Every integer tier gives the same bits.
+//!
+//! [`RangeProbe`]: an identity op before each layer [`quantise_linears`] would take, which
+//! folds the largest `|x|` it sees into a [`RangeLog`] under the layer's name: what
+//! `satmap-sim compile --calibrate` records over frames of the training split.
+//!
+//! Both passes choose layers with the same rule ([`layers`]): every linear layer the native f32
+//! product would take ([`Layer::is_native`]), keyed by its `EinSum` node's name in the
+//! decluttered graph, which is the same in every load of the same stage.
+
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+
+use satmap_kernels::qgemm::{self, IntTier, PackedQB, QFinish, padded_k, quantize};
+use tract_nnef::internal::*;
+
+use crate::graph::matching::replace_with_op;
+use crate::ops::linear::{Layer, as_layer, bias_after};
+use crate::pool;
+
+/// Rows of the activation quantised and multiplied as one task (a thread's share).
+const BAND_ROWS: usize = 64;
+
+/// `x [.., k] . W [k, n] (+ bias [n]) -> [.., n]` in int8 with i32 sums.
+#[derive(Clone, Debug)]
+pub struct QuantLinear {
+    /// The activation's shape (its last axis `k`).
+    pub input: TVec<usize>,
+    /// Outputs a token.
+    pub n: usize,
+    /// `1 / activation scale`.
+    inv_scale: f32,
+    /// The activation's scale times each column's weight scale.
+    col_scale: Arc<Vec<f32>>,
+    weights: Arc<PackedQB>,
+    bias: Option<Arc<Vec<f32>>>,
+    tier: IntTier,
+}
+
+impl PartialEq for QuantLinear {
+    fn eq(&self, other: &Self) -> bool {
+        self.input == other.input
+            && self.n == other.n
+            && self.inv_scale.to_bits() == other.inv_scale.to_bits()
+            && self.tier == other.tier
+            && Arc::ptr_eq(&self.weights, &other.weights)
+            && Arc::ptr_eq(&self.col_scale, &other.col_scale)
+    }
+}
+impl Eq for QuantLinear {}
+
+impl QuantLinear {
+    /// The layer `w [k][n]` (row-major f32) with `bias`, its activation of largest magnitude
+    /// `abs_max`, on `tier`.
+    ///
+    /// # Errors
+    /// Weights that do not pack (`k` over the exact limit, a size mismatch).
+    pub fn new(
+        input: TVec<usize>,
+        w: &[f32],
+        n: usize,
+        bias: Option<Vec<f32>>,
+        abs_max: f32,
+        tier: IntTier,
+    ) -> TractResult<Self> {
+        let k = input.last().copied().unwrap_or(0);
+        let (q, w_scales) = quantize::weights_per_column(w, k, n);
+        let weights = PackedQB::pack(&q, k, n)?;
+        let a_scale = quantize::scale_for(abs_max);
+        Ok(Self {
+            input,
+            n,
+            inv_scale: 1.0 / a_scale,
+            col_scale: Arc::new(w_scales.iter().map(|&s| a_scale * s).collect()),
+            weights: Arc::new(weights),
+            bias: bias.map(Arc::new),
+            tier,
+        })
+    }
+
+    fn k(&self) -> usize {
+        self.input.last().copied().unwrap_or(0)
+    }
+
+    fn output_shape(&self) -> TVec<usize> {
+        let mut s = self.input.clone();
+        if let Some(last) = s.last_mut() {
+            *last = self.n;
+        }
+        s
+    }
+}
+
+std::thread_local! {
+    /// The quantised rows of this thread's band, kept between runs (it only grows, so a step
+    /// allocates here only the first time a thread meets its widest layer).
+    static ROWS: std::cell::RefCell<Vec<i8>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+impl Op for QuantLinear {
+    fn info(&self) -> TractResult<Vec<String>> {
+        let m = self.input.iter().product::<usize>() / self.k().max(1);
+        Ok(vec![format!(
+            "Mult: m:{m} k:{} n:{} int8 on {}",
+            self.k(),
+            self.n,
+            self.tier
+        )])
+    }
+
+    fn name(&self) -> StaticName {
+        "QuantLinear".into()
+    }
+    op_as_typed_op!();
+}
+
+impl EvalOp for QuantLinear {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        ensure!(inputs.len() == 1, "QuantLinear takes one input");
+        let x = &inputs[0];
+        ensure!(
+            x.shape() == &*self.input,
+            "QuantLinear input {:?}",
+            x.shape()
+        );
+        let px = x.try_as_plain_ram()?;
+        let xs = px.as_slice::<f32>()?;
+        let (k, n) = (self.k(), self.n);
+        let m = xs.len() / k.max(1);
+        let kp = padded_k(k);
+        let mut out = crate::gemm::output_tensor(&self.output_shape())?;
+        let mut po = out.try_as_plain_ram_mut()?;
+        let c = po.as_slice_mut::<f32>()?;
+        let finish = QFinish {
+            scale: &self.col_scale,
+            bias: self.bias.as_deref().map(Vec::as_slice),
+            residual: None,
+            floor: None,
+        };
+        let parallel = pool::worth_threads(m * k * n);
+        let done = pool::on_threads(parallel, c, BAND_ROWS * n.max(1), |i, band| {
+            let r0 = i * BAND_ROWS;
+            let rows = band.len() / n.max(1);
+            let x = &xs[r0 * k..(r0 + rows) * k];
+            ROWS.with(|buf| {
+                let mut buf = buf.borrow_mut();
+                if buf.len() < rows * kp {
+                    buf.resize(rows * kp, 0);
+                }
+                let a = &mut buf[..rows * kp];
+                quantize::activations(x, rows, k, self.inv_scale, a)
+                    && qgemm::product(self.tier, a, rows, &self.weights, finish, band, n).is_ok()
+            })
+        });
+        ensure!(done, "integer product refused (operands mis-sized)");
+        Ok(tvec!(out.into_tvalue()))
+    }
+}
+
+impl TypedOp for QuantLinear {
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
+        Ok(tvec!(f32::fact(self.output_shape())))
+    }
+
+    fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
+        let macs = self.input.iter().product::<usize>() * self.n;
+        Ok(tvec!((Cost::FMA(i8::datum_type()), macs.to_dim())))
+    }
+
+    as_op!();
+}
+
+/// The largest `|x|` seen per layer name, shared by the probes of every stage of one load.
+#[derive(Clone, Debug, Default)]
+pub struct RangeLog(Arc<Mutex<BTreeMap<String, f32>>>);
+
+impl RangeLog {
+    /// Fold `abs_max` into `key`'s range.
+    fn observe(&self, key: &str, abs_max: f32) {
+        // A poisoned log (a probe panicked mid-update) still holds valid maxima.
+        let mut map = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let m = map.entry(key.to_owned()).or_insert(0.0);
+        *m = m.max(abs_max);
+    }
+
+    /// The ranges so far, by layer name.
+    #[must_use]
+    pub fn ranges(&self) -> BTreeMap<String, f32> {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+    }
+}
+
+/// An identity op that records its input's largest magnitude under `key`.
+#[derive(Clone, Debug)]
+pub struct RangeProbe {
+    /// The layer's name.
+    pub key: String,
+    log: RangeLog,
+}
+
+impl PartialEq for RangeProbe {
+    fn eq(&self, other: &Self) -> bool {
+        self.key == other.key && Arc::ptr_eq(&self.log.0, &other.log.0)
+    }
+}
+impl Eq for RangeProbe {}
+
+impl Op for RangeProbe {
+    fn name(&self) -> StaticName {
+        "RangeProbe".into()
+    }
+    op_as_typed_op!();
+}
+
+impl EvalOp for RangeProbe {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        ensure!(inputs.len() == 1, "RangeProbe takes one input");
+        let x = inputs[0].try_as_plain_ram()?;
+        self.log.observe(&self.key, quantize::abs_max(x.as_slice::<f32>()?));
+        Ok(inputs)
+    }
+}
+
+impl TypedOp for RangeProbe {
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        ensure!(inputs.len() == 1);
+        Ok(tvec!(inputs[0].without_value()))
+    }
+
+    as_op!();
+}
+
+/// The layers the int8 passes take, in evaluation order: `(node id, name, layer)`.
+fn layers(model: &TypedModel) -> TractResult<Vec<(usize, String, Layer)>> {
+    let mut out = Vec::new();
+    for id in model.eval_order()? {
+        if let Some(layer) = as_layer(model, id)?
+            && layer.is_native()
+        {
+            out.push((id, model.node(id).name.clone(), layer));
+        }
+    }
+    Ok(out)
+}
+
+/// Replace every layer [`layers`] finds that has a range in `ranges` by a [`QuantLinear`] on
+/// `tier`, its bias `Add` taken in; returns the model and the number replaced.
+///
+/// # Errors
+/// tract refusing a patch, or weights that do not pack.
+pub fn quantise_linears(
+    mut model: TypedModel,
+    ranges: &BTreeMap<String, f32>,
+    tier: IntTier,
+) -> TractResult<(TypedModel, usize)> {
+    let mut done = 0;
+    // Ids stay valid while patching: a patch appends nodes and leaves the old ones dead.
+    for (id, name, layer) in layers(&model)? {
+        let Some(&abs_max) = ranges.get(&name) else {
+            continue;
+        };
+        let (rank, n) = (layer.input.len(), layer.n);
+        let bias = bias_after(&model, id, |shape| {
+            shape.len() <= rank
+                && shape.last() == Some(&n)
+                && shape[..shape.len() - 1].iter().all(|&d| d == 1)
+        })?;
+        let w = layer.w.try_as_plain_ram()?;
+        let op = QuantLinear::new(
+            layer.input.clone(),
+            w.as_slice::<f32>()?,
+            n,
+            bias.as_ref().map(|(_, b)| b.clone()),
+            abs_max,
+            tier,
+        )?;
+        let replaced = bias.map_or(id, |(add_id, _)| add_id);
+        replace_with_op(&mut model, &[layer.x], replaced, format!("{name}.int8"), op)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
+
+/// Put a [`RangeProbe`] into `log` before every layer [`layers`] finds; returns the model and
+/// the number of probes.
+///
+/// # Errors
+/// tract refusing a patch.
+pub fn probe_linears(mut model: TypedModel, log: &RangeLog) -> TractResult<(TypedModel, usize)> {
+    let mut done = 0;
+    for (id, name, layer) in layers(&model)? {
+        let node = model.node(id).clone();
+        let mut patch = TypedModelPatch::default();
+        let mut taps: TVec<OutletId> = node
+            .inputs
+            .iter()
+            .map(|&o| patch.tap_model(&model, o))
+            .collect::<TractResult<_>>()?;
+        let xi = node
+            .inputs
+            .iter()
+            .position(|&o| o == layer.x)
+            .context("the layer's activation is one of its inputs")?;
+        let probe = RangeProbe {
+            key: name.clone(),
+            log: log.clone(),
+        };
+        taps[xi] = patch.wire_node(format!("{name}.range_probe"), probe, &[taps[xi]])?[0];
+        let y = patch.wire_node(format!("{name}.probed"), node.op.clone(), &taps)?[0];
+        patch.shunt_outside(&model, OutletId::new(id, 0), y)?;
+        patch.apply(&mut model)?;
+        done += 1;
+    }
+    Ok((model, done))
+}
