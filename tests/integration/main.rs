@@ -13,6 +13,7 @@ mod compiled_bundle;
 mod docs_links;
 mod forged_graphs;
 mod golden_step;
+mod int8_arithmetic;
 mod layout_variants;
 mod route_frame_distortion;
 mod route_pack_compressed;

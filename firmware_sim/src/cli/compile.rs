@@ -2,13 +2,18 @@
 //! compiled bundle the ECU engine loads (NNEF stages; format in `ARCHITECTURE.md`, "Compiled
 //! bundle"), checked against a memory layout before it is written.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
-use satmap_runtime::bundle::{Bundle, Precision};
-use satmap_runtime::engine_tract::TractEngine;
-use satmap_runtime::translate::compile;
+use anyhow::{Context, Result, bail};
+use satmap_runtime::bundle::{ActivationRange, Bundle, GraphFormat, Int8Calibration, Precision};
+use satmap_runtime::engine_tract::{LoadOptions, RangeLog, TractEngine};
+use satmap_runtime::translate::{compile, with_calibration};
+
+use crate::cli::export_dataset::{SeedRange, TRAIN_SEEDS};
+use crate::harness::replay_with;
+use crate::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput};
+use crate::route_pack_builder::TileCompression;
 
 use crate::cli::memory_map::{built_in_layout_line, read_layout};
 
@@ -28,6 +33,92 @@ pub struct Args {
     /// Memory layout the model must fit (default: the one this binary was built with).
     #[arg(long)]
     pub layout: Option<PathBuf>,
+    /// With `--precision int8`: calibrate the linear layers' activations over synthetic drives
+    /// of these world seeds (`a..b`, inside the training split 1000..1160; a seed of the
+    /// validation or held-out test split is refused), of the folder compiled here or of an
+    /// already compiled int8 `--bundle` (its stages then kept byte for byte). The bundle's linear layers then run in
+    /// int8 with i32 sums (W8A8); without it they widen to f32 (W8A32).
+    #[arg(long)]
+    pub calibrate: Option<SeedRange>,
+    /// Frames of each calibration drive.
+    #[arg(long, default_value_t = 8)]
+    pub calibration_frames: usize,
+}
+
+/// The calibration frames a compile may use: `precision` int8, `seeds` inside the training
+/// split, 1..=240 frames a drive.
+///
+/// # Errors
+/// Which of those does not hold, and why.
+pub fn check_calibration(precision: Precision, seeds: SeedRange, frames: usize) -> Result<()> {
+    if precision != Precision::Int8 {
+        bail!("--calibrate takes --precision int8 (activation ranges are for integer products)");
+    }
+    if !seeds.within(TRAIN_SEEDS) {
+        bail!(
+            "--calibrate {}..{}: calibration frames come from the training split's worlds only \
+             ({}..{}); validation and held-out test worlds are never used for a choice",
+            seeds.start,
+            seeds.end,
+            TRAIN_SEEDS.start,
+            TRAIN_SEEDS.end
+        );
+    }
+    if !(1..=240).contains(&frames) {
+        bail!("--calibration-frames {frames}: need 1..=240");
+    }
+    Ok(())
+}
+
+/// The activation ranges of the linear layers of `bundle` (a compiled int8 file) over
+/// `frames` frames of a synthetic drive of each world of `seeds`, the engine probing each
+/// layer's input: the largest magnitude seen (abs-max, symmetric; see docs/int8.md).
+///
+/// # Errors
+/// A replay failing.
+pub fn calibrate(bundle: &Path, seeds: SeedRange, frames: usize) -> Result<Int8Calibration> {
+    let log = RangeLog::default();
+    let options = LoadOptions {
+        observe: Some(log.clone()),
+        ..LoadOptions::default()
+    };
+    for seed in seeds.seeds() {
+        let cfg = ReplayConfig {
+            bundle_dir: bundle.to_path_buf(),
+            scenario: ScenarioInput::Synthetic {
+                seed,
+                speed_mps: 8.0,
+                drive_hz: 2.0,
+            },
+            frames,
+            rate_hz: 1e6 / satmap_runtime::capacity::layout::STEP_PERIOD_US as f64,
+            max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
+            show_progress: false,
+            pack_compression: TileCompression::Raw,
+            threads: std::num::NonZeroUsize::MIN,
+        };
+        replay_with(&cfg, None, None, &options)
+            .with_context(|| format!("calibration drive of world {seed}"))?;
+    }
+    let layers = log
+        .ranges()
+        .into_iter()
+        .map(|((stage, layer), abs_max)| ActivationRange {
+            stage,
+            layer,
+            abs_max,
+        })
+        // A layer whose input was all zeros has no range: it stays f32.
+        .filter(|r| r.abs_max.is_finite() && r.abs_max > 0.0)
+        .collect();
+    Ok(Int8Calibration {
+        method: "abs-max".into(),
+        frames: format!(
+            "synthetic drives of training-split worlds {}..{}, {frames} frames each at 2 Hz",
+            seeds.start, seeds.end
+        ),
+        layers,
+    })
 }
 
 /// Compile, write, then load the written file back through the engine once and print the load
@@ -37,8 +128,31 @@ pub struct Args {
 /// The source bundle refused, a stage that does not translate, the layout too small, or the
 /// output not writable.
 pub fn run(args: &Args) -> Result<()> {
+    if let Some(seeds) = args.calibrate {
+        check_calibration(args.precision, seeds, args.calibration_frames)?;
+    }
     let layout = read_layout(args.layout.as_deref())?;
     let source = Bundle::open(&args.bundle)?;
+    if let (GraphFormat::Nnef, Some(seeds)) = (source.format(), args.calibrate) {
+        // A compiled int8 bundle: its stages kept byte for byte, the ranges added.
+        let t = Instant::now();
+        let calibration = calibrate(&args.bundle, seeds, args.calibration_frames)?;
+        let bytes = with_calibration(&source, &calibration)?;
+        std::fs::write(&args.out, &bytes)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        println!(
+            "{}: stages kept; calibrated {} linear layers' activations ({}, {}) in {:.1} s\nwrote {} ({} bytes), digest {}",
+            args.bundle.display(),
+            calibration.layers.len(),
+            calibration.method,
+            calibration.frames,
+            t.elapsed().as_secs_f64(),
+            args.out.display(),
+            bytes.len(),
+            Bundle::open(&args.out)?.digest()
+        );
+        return Ok(());
+    }
     let compiled = compile(&source, args.precision, |name| {
         layout.region(name).map(|r| r.bytes)
     })?;
@@ -60,6 +174,20 @@ pub fn run(args: &Args) -> Result<()> {
             s.nnef_bytes,
             s.f32_weight_bytes,
             s.translate_ms
+        );
+    }
+    if let Some(seeds) = args.calibrate {
+        let t = Instant::now();
+        let calibration = calibrate(&args.out, seeds, args.calibration_frames)?;
+        let bytes = with_calibration(&Bundle::open(&args.out)?, &calibration)?;
+        std::fs::write(&args.out, &bytes)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        println!(
+            "calibrated {} linear layers' activations ({}, {}) in {:.1} s",
+            calibration.layers.len(),
+            calibration.method,
+            calibration.frames,
+            t.elapsed().as_secs_f64()
         );
     }
     let written = Bundle::open(&args.out)?;

@@ -64,9 +64,23 @@ impl std::str::FromStr for SeedRange {
     }
 }
 
+/// The training split's world seeds (`export-dataset`'s default `--train-seeds`): the only
+/// worlds a calibration may look at.
+pub const TRAIN_SEEDS: SeedRange = SeedRange {
+    start: 1000,
+    end: 1160,
+};
+
 impl SeedRange {
-    fn seeds(self) -> impl Iterator<Item = u64> {
+    /// The seeds, in order.
+    pub fn seeds(self) -> impl Iterator<Item = u64> {
         self.start..self.end
+    }
+
+    /// Whether every seed of `self` is in `other`.
+    #[must_use]
+    pub fn within(self, other: Self) -> bool {
+        other.start <= self.start && self.end <= other.end
     }
 
     fn overlaps(self, other: Self) -> bool {

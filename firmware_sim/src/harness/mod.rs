@@ -52,6 +52,7 @@ pub use error::{EXIT_BAD_INPUT, EXIT_BUDGET_EXCEEDED, EXIT_DEGRADED, HarnessErro
 pub use recording_source::{MAX_RECORDING_BYTES, RecordingFiles};
 pub use replay::{
     MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ, StepObserver, StepView, replay, replay_observed,
+    replay_with,
 };
 pub use route_replay::{RouteReplayConfig, RouteReplayReport, replay_route};
 

@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use satmap_runtime::bundle::Bundle;
 use satmap_runtime::calibration::NUM_CAMERAS;
 use satmap_runtime::capacity::layout;
-use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::engine_tract::{LoadOptions, TractEngine};
 use satmap_runtime::frame::{CameraImage, CameraState, Frame, FrameLimits};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::map_frame::MapFrame;
@@ -141,7 +141,21 @@ pub fn replay(
 pub fn replay_observed(
     cfg: &ReplayConfig,
     alloc: Option<&'static ArenaAllocator>,
+    observer: Option<&mut dyn StepObserver>,
+) -> Result<Replay, HarnessError> {
+    replay_with(cfg, alloc, observer, &LoadOptions::default())
+}
+
+/// [`replay_observed`] with the engine loaded with `options` (an int8 bundle's arithmetic, a
+/// calibration's range probes).
+///
+/// # Errors
+/// As [`replay_observed`].
+pub fn replay_with(
+    cfg: &ReplayConfig,
+    alloc: Option<&'static ArenaAllocator>,
     mut observer: Option<&mut dyn StepObserver>,
+    options: &LoadOptions,
 ) -> Result<Replay, HarnessError> {
     // 1 mHz .. 10 kHz keeps every virtual timestamp (start + frames * period) far from u64
     // overflow for any frame count the harness can hold.
@@ -194,10 +208,11 @@ pub fn replay_observed(
     // ECU side: the graph engine, then the runtime's regions.
     let before_engine = stats_of(alloc);
     label(alloc, ArenaRegion::GraphEngine);
-    let mut engine = TractEngine::load(&bundle).map_err(|e| HarnessError::Bundle {
-        path: cfg.bundle_dir.clone(),
-        message: e.to_string(),
-    })?;
+    let mut engine =
+        TractEngine::load_options(&bundle, options).map_err(|e| HarnessError::Bundle {
+            path: cfg.bundle_dir.clone(),
+            message: e.to_string(),
+        })?;
     engine
         .set_threads(cfg.threads)
         .map_err(|e| HarnessError::Settings(e.to_string()))?;

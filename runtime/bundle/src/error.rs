@@ -104,6 +104,14 @@ pub enum BundleError {
         /// The stage name.
         stage: &'static str,
     },
+    /// An `[int8]` activation range the runtime cannot use.
+    #[error("manifest [int8] layer `{layer}`: {reason}")]
+    Int8Range {
+        /// The layer's name (empty for the table as a whole).
+        layer: String,
+        /// What is wrong.
+        reason: &'static str,
+    },
     /// A stage entry the runtime has no stage for, or a second entry of one stage.
     #[error("manifest stage `{name}`: {reason}")]
     StageEntry {

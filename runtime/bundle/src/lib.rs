@@ -31,7 +31,10 @@ pub mod signature;
 
 pub use digest::{DigestParseError, Sha256Digest};
 pub use error::BundleError;
-pub use manifest::{CompiledFrom, DType, Manifest, Precision, StageEntry, TensorSpec};
+pub use manifest::{
+    ActivationRange, CompiledFrom, DType, Int8Calibration, Manifest, Precision, StageEntry,
+    TensorSpec,
+};
 pub use model_table::ModelTable;
 pub use signature::{
     BundlePublicKey, BundleSignature, KeyTextError, Trust, archive_digest_unparsed, signature_path,

@@ -119,6 +119,48 @@ pub struct Manifest {
     /// The stages.
     #[serde(rename = "stage")]
     pub stages: Vec<StageEntry>,
+    /// The activation ranges of an int8 bundle calibrated for integer arithmetic (`[int8]`;
+    /// absent: its weights are widened to f32, W8A32).
+    #[serde(default)]
+    pub int8: Option<Int8Calibration>,
+}
+
+/// `[int8]`: how the activations of an int8 bundle's linear layers were calibrated, and the
+/// range of each. Covered by the bundle's digest like every manifest byte.
+#[derive(Clone, Debug, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Int8Calibration {
+    /// How a range was taken from the frames' values (`abs-max`: the largest magnitude seen).
+    pub method: String,
+    /// The frames it was taken over (world seeds of the training split, frames per drive).
+    pub frames: String,
+    /// One range per quantised layer.
+    #[serde(rename = "layer")]
+    pub layers: Vec<ActivationRange>,
+}
+
+/// One `[[int8.layer]]`: the largest activation magnitude of one linear layer.
+#[derive(Clone, Debug, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ActivationRange {
+    /// The stage the layer is in ([`Stage::name`]).
+    pub stage: String,
+    /// The layer's name in the stage's decluttered graph.
+    pub layer: String,
+    /// The largest `|x|` of its input over the calibration frames (finite, positive).
+    pub abs_max: f32,
+}
+
+impl Int8Calibration {
+    /// The ranges of `stage`'s layers, by layer name.
+    #[must_use]
+    pub fn stage_ranges(&self, stage: Stage) -> std::collections::BTreeMap<String, f32> {
+        self.layers
+            .iter()
+            .filter(|r| r.stage == stage.name())
+            .map(|r| (r.layer.clone(), r.abs_max))
+            .collect()
+    }
 }
 
 impl Manifest {
@@ -129,6 +171,42 @@ impl Manifest {
     pub fn parse(bytes: &[u8]) -> Result<Self, String> {
         let text = std::str::from_utf8(bytes).map_err(|e| e.to_string())?;
         toml::from_str(text).map_err(|e| e.to_string())
+    }
+
+    /// An `[int8]` table only in an int8 bundle, each range of a known stage, finite and
+    /// positive, each layer once.
+    ///
+    /// # Errors
+    /// [`BundleError::Int8Range`] naming the first offending range.
+    pub fn check_int8(&self) -> Result<(), BundleError> {
+        let Some(cal) = &self.int8 else {
+            return Ok(());
+        };
+        let refuse = |layer: &str, reason: &'static str| BundleError::Int8Range {
+            layer: layer.to_owned(),
+            reason,
+        };
+        if self.precision != Precision::Int8 {
+            return Err(refuse(
+                "",
+                "an [int8] table in a bundle whose precision is not int8",
+            ));
+        }
+        for (ix, r) in cal.layers.iter().enumerate() {
+            if !Stage::ALL.iter().any(|s| s.name() == r.stage) {
+                return Err(refuse(&r.layer, "unknown stage"));
+            }
+            if !(r.abs_max.is_finite() && r.abs_max > 0.0) {
+                return Err(refuse(&r.layer, "a range that is not finite and positive"));
+            }
+            if cal.layers[..ix]
+                .iter()
+                .any(|o| o.stage == r.stage && o.layer == r.layer)
+            {
+                return Err(refuse(&r.layer, "listed twice"));
+            }
+        }
+        Ok(())
     }
 
     /// Every entry names a runtime stage, and no stage is listed twice (an extra or repeated

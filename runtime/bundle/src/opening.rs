@@ -124,6 +124,7 @@ pub(crate) fn checked_manifest(path: &Path, bytes: &[u8]) -> Result<Manifest, Bu
         reason: e.to_string(),
     })?;
     manifest.check_stage_names()?;
+    manifest.check_int8()?;
     Ok(manifest)
 }
 

@@ -50,7 +50,7 @@ pub mod vector_state;
 use tract_nnef::framework::Nnef;
 use tract_nnef::prelude::*;
 
-use satmap_bundle::{Bundle, BundleError, GraphFormat};
+use satmap_bundle::{Bundle, BundleError, GraphFormat, Precision};
 use satmap_core::engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
 use satmap_core::model_dims::ModelDims;
 
@@ -59,6 +59,8 @@ pub use graph::load::{HalfArithmetic, parse_stage_graph};
 pub use graph::load::{check_graph_io, engine_error, nnef_model, onnx_model};
 pub(crate) use graph::load::{confined, datum};
 pub use kernel_family::{KernelFamily, kernel_family};
+pub use ops::quant_linear::RangeLog;
+use passes::rewrite::Quantisation;
 pub use passes::rewrite::Rewrites;
 use runner::{StageRunner, on_engine_threads, panic_message};
 
@@ -68,6 +70,28 @@ pub struct TractEngine {
     runners: Vec<StageRunner>,
     executor: Executor,
     threads: NonZeroUsize,
+}
+
+/// What an int8 bundle with calibrated activation ranges (manifest `[int8]`) computes in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Int8Arithmetic {
+    /// Its linear layers in int8 with i32 sums (W8A8) on this CPU's integer tier.
+    #[default]
+    Integer,
+    /// Its weights widened to f32, every product in f32 (W8A32): the form before calibration.
+    Widened,
+}
+
+/// The choices of a load ([`TractEngine::load_options`]).
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// An f16 bundle's arithmetic.
+    pub half: HalfArithmetic,
+    /// An int8 bundle's arithmetic.
+    pub int8: Int8Arithmetic,
+    /// A calibration run: every layer the int8 passes take gets a probe recording its input's
+    /// range into this log (and runs in f32).
+    pub observe: Option<RangeLog>,
 }
 
 /// Most threads [`TractEngine::set_threads`] starts (more than any ECU or host core count
@@ -98,13 +122,24 @@ impl TractEngine {
     /// path retired 1.5-2x the instructions of the f32 one on the encoders (docs/perf.md, "On
     /// ARM"), so f16 arithmetic is a choice ([`TractEngine::load_with`]), not the default.
     pub fn load(bundle: &Bundle) -> Result<Self, BundleError> {
-        Self::load_with(bundle, HalfArithmetic::Widened)
+        Self::load_options(bundle, &LoadOptions::default())
     }
 
     /// [`TractEngine::load`] with an f16 bundle's arithmetic chosen by the caller (an f32 or
     /// int8 bundle ignores it). [`HalfArithmetic::Native`] on a core without f16 arithmetic
     /// runs tract's portable f16 kernels: correct, and slow.
     pub fn load_with(bundle: &Bundle, half: HalfArithmetic) -> Result<Self, BundleError> {
+        Self::load_options(
+            bundle,
+            &LoadOptions {
+                half,
+                ..LoadOptions::default()
+            },
+        )
+    }
+
+    /// [`TractEngine::load`] with every choice of [`LoadOptions`].
+    pub fn load_options(bundle: &Bundle, options: &LoadOptions) -> Result<Self, BundleError> {
         // tract-core's operators only: a graph that needs another registry is refused at load.
         let nnef = tract_nnef::nnef();
         // tract panics on some graphs it cannot run (an axis past the rank, a stride of 0):
@@ -112,7 +147,7 @@ impl TractEngine {
         // structural check before tract (`graph_check`) keeps those graphs away.
         let runners = Stage::ALL
             .iter()
-            .map(|&stage| confined(stage, || StageRunner::load(bundle, &nnef, stage, half)))
+            .map(|&stage| confined(stage, || StageRunner::load(bundle, &nnef, stage, options)))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             dims: bundle.dims().clone(),

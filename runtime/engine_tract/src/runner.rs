@@ -23,8 +23,9 @@ impl StageRunner {
         bundle: &Bundle,
         nnef: &Nnef,
         stage: Stage,
-        half: HalfArithmetic,
+        options: &LoadOptions,
     ) -> Result<Self, BundleError> {
+        let half = options.half;
         let entry = bundle.manifest().stage(stage)?;
         let bytes = bundle.read_stage(stage)?;
         let engine_err = engine_error(stage);
@@ -40,9 +41,10 @@ impl StageRunner {
             GraphFormat::Onnx => (onnx_model(stage, &bytes, entry)?, None),
         };
         drop(bytes);
+        let quantisation = quantisation(bundle, stage, options).map_err(engine_err)?;
         let (model, rewrites) = model
             .into_decluttered()
-            .and_then(crate::passes::rewrite::optimise)
+            .and_then(|m| crate::passes::rewrite::optimise(m, &quantisation))
             .map_err(engine_err)?;
         let plan = model.into_runnable().map_err(engine_err)?;
         check_graph_io(
@@ -171,6 +173,28 @@ impl StageRunner {
             out.copy_from_slice(src);
         }
         Ok(())
+    }
+}
+
+/// What `stage`'s load does with its linear layers: probes for a calibration run; int8 for an
+/// int8 bundle with calibrated ranges unless the caller asked for widened weights; else f32.
+fn quantisation(bundle: &Bundle, stage: Stage, options: &LoadOptions) -> TractResult<Quantisation> {
+    if let Some(log) = &options.observe {
+        return Ok(Quantisation::Observe {
+            log: log.clone(),
+            stage: stage.name(),
+        });
+    }
+    let manifest = bundle.manifest();
+    match (&manifest.int8, options.int8) {
+        (Some(cal), Int8Arithmetic::Integer) if manifest.precision == Precision::Int8 => {
+            let tier = satmap_kernels::qgemm::IntTier::chosen()?;
+            Ok(Quantisation::Int8 {
+                ranges: cal.stage_ranges(stage),
+                tier,
+            })
+        }
+        _ => Ok(Quantisation::None),
     }
 }
 

@@ -4,7 +4,7 @@
 
 use tract_nnef::internal::*;
 
-use crate::passes::rewrite::{Pass, Rewrites, optimise_before};
+use crate::passes::rewrite::{Pass, Quantisation, Rewrites, optimise_before};
 use crate::{HalfArithmetic, nnef_model};
 use satmap_bundle::Bundle;
 use satmap_core::engine::Stage;
@@ -66,7 +66,7 @@ pub(crate) fn committed_stage(stage: Stage) -> TypedModel {
 /// [`committed_stage`] through the engine's rewrites that run before `stop`: the graph `stop`
 /// sees at load.
 pub(crate) fn committed_stage_before(stage: Stage, stop: Pass) -> TypedModel {
-    optimise_before(committed_stage(stage), Some(stop))
+    optimise_before(committed_stage(stage), Some(stop), &Quantisation::None)
         .expect("rewrites")
         .0
 }

@@ -178,6 +178,56 @@ pub fn compile(
     Ok(Compiled { bytes, stages })
 }
 
+/// The compiled int8 `bundle` again with `calibration` as its manifest's `[int8]` table (a
+/// previous one replaced), the stages' bytes unchanged: an int8 bundle whose linear layers run
+/// in integer arithmetic. Returns the new archive's bytes, already read back.
+///
+/// # Errors
+/// A bundle that is not a compiled int8 one ([`CompileError::Precision`]), a range the reader
+/// refuses, or a manifest that does not serialise.
+pub fn with_calibration(
+    bundle: &Bundle,
+    calibration: &satmap_bundle::Int8Calibration,
+) -> Result<Vec<u8>, CompileError> {
+    if bundle.format() != GraphFormat::Nnef || bundle.manifest().precision != Precision::Int8 {
+        return Err(CompileError::Precision {
+            path: bundle.path().to_path_buf(),
+            asked: Precision::Int8,
+            why: "activation ranges go into a compiled int8 bundle",
+        });
+    }
+    let path = bundle.path().join(MANIFEST_FILE);
+    let manifest_err = |message: String| BundleError::Manifest {
+        path: path.clone(),
+        message,
+    };
+    let text =
+        std::str::from_utf8(bundle.manifest_bytes()).map_err(|e| manifest_err(e.to_string()))?;
+    // The comment line that says who wrote it, kept.
+    let header = text
+        .lines()
+        .next()
+        .filter(|l| l.starts_with('#'))
+        .unwrap_or("#");
+    let mut table: toml::Table = toml::from_str(text).map_err(|e| manifest_err(e.to_string()))?;
+    let int8 = toml::Table::try_from(calibration).map_err(|e| manifest_err(e.to_string()))?;
+    table.insert("int8".into(), int8.into());
+    let body = toml::to_string(&table).map_err(|e| manifest_err(e.to_string()))?;
+    let manifest = format!("{header}\n{body}");
+    let mut tars = Vec::with_capacity(Stage::ALL.len());
+    for stage in Stage::ALL {
+        let entry = bundle.manifest().stage(stage)?;
+        tars.push((entry.file.clone(), bundle.read_stage(stage)?.into_owned()));
+    }
+    let entries: Vec<(&str, &[u8])> = tars
+        .iter()
+        .map(|(name, tar)| (name.as_str(), tar.as_slice()))
+        .collect();
+    let bytes = write_archive(manifest.as_bytes(), &entries)?;
+    Bundle::from_archive_bytes(bundle.path(), bytes.clone(), &Trust::SelfConsistent, None)?;
+    Ok(bytes)
+}
+
 /// The folder's manifest with each stage's `file` and `sha256` pointing at its NNEF entry; the
 /// `[model]` table and every interface are carried over as written.
 fn compiled_manifest(

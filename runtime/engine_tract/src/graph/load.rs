@@ -26,7 +26,7 @@ pub fn engine_error(stage: Stage) -> impl Fn(TractError) -> BundleError + Copy {
 }
 
 /// Where an f16 bundle's arithmetic runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum HalfArithmetic {
     /// In f16, for a core with f16 arithmetic (Armv8.2-A FEAT_FP16: Cortex-A55/A75 and later,
     /// every listed ECU application core but the A72): the stored graph runs as it is, with a
@@ -37,7 +37,8 @@ pub enum HalfArithmetic {
     /// Widened to f32 at load: f16-rounded weights, f32 arithmetic, f32 RAM (the widened
     /// constants fold into f32 ones when the plan is optimised). Where the core has no f16
     /// arithmetic (x86 here, where tract's f16 kernels are portable fallbacks tens of times
-    /// slower than f32) and wherever f32 arithmetic is wanted.
+    /// slower than f32) and wherever f32 arithmetic is wanted. The default.
+    #[default]
     Widened,
 }
 

@@ -180,22 +180,32 @@ impl TypedOp for QuantLinear {
     as_op!();
 }
 
-/// The largest `|x|` seen per layer name, shared by the probes of every stage of one load.
+/// The largest `|x|` seen per `(stage, layer name)`, shared by the probes of every stage of
+/// one load (and of every load given the same log).
 #[derive(Clone, Debug, Default)]
-pub struct RangeLog(Arc<Mutex<BTreeMap<String, f32>>>);
+pub struct RangeLog(Arc<Mutex<BTreeMap<(String, String), f32>>>);
+
+impl PartialEq for RangeLog {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
 
 impl RangeLog {
     /// Fold `abs_max` into `key`'s range.
-    fn observe(&self, key: &str, abs_max: f32) {
+    fn observe(&self, key: &(String, String), abs_max: f32) {
         // A poisoned log (a probe panicked mid-update) still holds valid maxima.
-        let mut map = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        let m = map.entry(key.to_owned()).or_insert(0.0);
+        let mut map = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let m = map.entry(key.clone()).or_insert(0.0);
         *m = m.max(abs_max);
     }
 
-    /// The ranges so far, by layer name.
+    /// The ranges so far, by `(stage, layer name)`.
     #[must_use]
-    pub fn ranges(&self) -> BTreeMap<String, f32> {
+    pub fn ranges(&self) -> BTreeMap<(String, String), f32> {
         self.0
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -206,8 +216,8 @@ impl RangeLog {
 /// An identity op that records its input's largest magnitude under `key`.
 #[derive(Clone, Debug)]
 pub struct RangeProbe {
-    /// The layer's name.
-    pub key: String,
+    /// The stage's and the layer's name.
+    pub key: (String, String),
     log: RangeLog,
 }
 
@@ -231,7 +241,8 @@ impl EvalOp for RangeProbe {
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         ensure!(inputs.len() == 1, "RangeProbe takes one input");
         let x = inputs[0].try_as_plain_ram()?;
-        self.log.observe(&self.key, quantize::abs_max(x.as_slice::<f32>()?));
+        self.log
+            .observe(&self.key, quantize::abs_max(x.as_slice::<f32>()?));
         Ok(inputs)
     }
 }
@@ -245,17 +256,22 @@ impl TypedOp for RangeProbe {
     as_op!();
 }
 
-/// The layers the int8 passes take, in evaluation order: `(node id, name, layer)`.
-fn layers(model: &TypedModel) -> TractResult<Vec<(usize, String, Layer)>> {
+/// The layers the int8 passes take, in evaluation order: `(node id, name)`. A pass reads each
+/// one's [`Layer`] again when it reaches it ([`layer_at`]): a patch before it may have rewired
+/// its input.
+fn layers(model: &TypedModel) -> TractResult<Vec<(usize, String)>> {
     let mut out = Vec::new();
     for id in model.eval_order()? {
-        if let Some(layer) = as_layer(model, id)?
-            && layer.is_native()
-        {
-            out.push((id, model.node(id).name.clone(), layer));
+        if layer_at(model, id)?.is_some() {
+            out.push((id, model.node(id).name.clone()));
         }
     }
     Ok(out)
+}
+
+/// Node `id` as a layer the int8 passes take.
+fn layer_at(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
+    Ok(as_layer(model, id)?.filter(Layer::is_native))
 }
 
 /// Replace every layer [`layers`] finds that has a range in `ranges` by a [`QuantLinear`] on
@@ -270,8 +286,11 @@ pub fn quantise_linears(
 ) -> TractResult<(TypedModel, usize)> {
     let mut done = 0;
     // Ids stay valid while patching: a patch appends nodes and leaves the old ones dead.
-    for (id, name, layer) in layers(&model)? {
+    for (id, name) in layers(&model)? {
         let Some(&abs_max) = ranges.get(&name) else {
+            continue;
+        };
+        let Some(layer) = layer_at(&model, id)? else {
             continue;
         };
         let (rank, n) = (layer.input.len(), layer.n);
@@ -296,14 +315,21 @@ pub fn quantise_linears(
     Ok((model, done))
 }
 
-/// Put a [`RangeProbe`] into `log` before every layer [`layers`] finds; returns the model and
+/// Put a [`RangeProbe`] into `log` before every layer [`layers`] finds in `stage`; returns the model and
 /// the number of probes.
 ///
 /// # Errors
 /// tract refusing a patch.
-pub fn probe_linears(mut model: TypedModel, log: &RangeLog) -> TractResult<(TypedModel, usize)> {
+pub fn probe_linears(
+    mut model: TypedModel,
+    log: &RangeLog,
+    stage: &str,
+) -> TractResult<(TypedModel, usize)> {
     let mut done = 0;
-    for (id, name, layer) in layers(&model)? {
+    for (id, name) in layers(&model)? {
+        let Some(layer) = layer_at(&model, id)? else {
+            continue;
+        };
         let node = model.node(id).clone();
         let mut patch = TypedModelPatch::default();
         let mut taps: TVec<OutletId> = node
@@ -317,7 +343,7 @@ pub fn probe_linears(mut model: TypedModel, log: &RangeLog) -> TractResult<(Type
             .position(|&o| o == layer.x)
             .context("the layer's activation is one of its inputs")?;
         let probe = RangeProbe {
-            key: name.clone(),
+            key: (stage.to_owned(), name.clone()),
             log: log.clone(),
         };
         taps[xi] = patch.wire_node(format!("{name}.range_probe"), probe, &[taps[xi]])?[0];
@@ -327,4 +353,110 @@ pub fn probe_linears(mut model: TypedModel, log: &RangeLog) -> TractResult<(Type
         done += 1;
     }
     Ok((model, done))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The int8 layer against the f32 layer it replaces (within the quantisation's bound, stated
+    //! per case), bit for bit across every integer tier this CPU has, and the probes: the range
+    //! they record is the input's largest magnitude, and the probed model computes the same bits.
+    use super::*;
+    use crate::test_support::{bits, linear_model, run_optimized};
+
+    fn input(shape: &[usize]) -> TVec<TValue> {
+        let len: usize = shape.iter().product();
+        let x: Vec<f32> = (0..len)
+            .map(|i| ((i * 31) % 97) as f32 / 48.0 - 1.0)
+            .collect();
+        tvec![Tensor::from_shape(shape, &x).unwrap().into_tvalue()]
+    }
+
+    fn values(t: &TValue) -> Vec<f32> {
+        t.try_as_plain_ram()
+            .unwrap()
+            .as_slice::<f32>()
+            .unwrap()
+            .to_vec()
+    }
+
+    #[test]
+    fn int8_layers_stay_within_the_quantisation_bound_and_agree_on_every_tier() {
+        for (lead, k, n, transposed, bias) in [
+            (vec![300], 64, 48, false, true),
+            (vec![2, 50], 130, 33, true, true),
+            (vec![9], 7, 2, true, false),
+        ] {
+            let model = linear_model(&lead, k, n, transposed, bias);
+            let mut shape = lead.clone();
+            shape.push(k);
+            let inputs = input(&shape);
+            let want = values(&run_optimized(model.clone(), &inputs)[0]);
+            // The input's range, as a calibration over this input would record it.
+            let abs_max = quantize::abs_max(&values(&inputs[0]));
+            let name = layers(&model).unwrap()[0].1.clone();
+            let ranges = BTreeMap::from([(name, abs_max)]);
+            let mut first: Option<Vec<u32>> = None;
+            for tier in IntTier::ALL.into_iter().filter(|t| t.runs_here()) {
+                let (q, done) = quantise_linears(model.clone(), &ranges, tier).unwrap();
+                assert_eq!(done, 1);
+                assert!(q.nodes().iter().any(|n| n.op_is::<QuantLinear>()));
+                let got = run_optimized(q, &inputs);
+                // Bound: each of k products off by at most half a step of each operand
+                // (|x| <= 1 and |w| <= 1 here): k * (s_x / 2 + s_w / 2 + s_x * s_w / 4).
+                let (s_x, s_w) = (abs_max / 127.0, 1.0 / 127.0);
+                let bound = k as f32 * (s_x / 2.0 + s_w / 2.0 + s_x * s_w / 4.0);
+                let worst = values(&got[0])
+                    .iter()
+                    .zip(&want)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0f32, f32::max);
+                assert!(
+                    worst <= bound,
+                    "{lead:?} x {k} -> {n} on {tier}: {worst} > {bound}"
+                );
+                assert!(
+                    worst > 0.0,
+                    "int8 that equals f32 bit for bit was not quantised"
+                );
+                let b = bits(&got[0]);
+                match &first {
+                    None => first = Some(b),
+                    Some(f) => assert_eq!(&b, f, "{tier} differs from the first tier"),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_layer_without_a_range_stays_f32() {
+        let model = linear_model(&[300], 64, 48, false, true);
+        let (_, done) = quantise_linears(model, &BTreeMap::new(), IntTier::Generic).unwrap();
+        assert_eq!(done, 0);
+    }
+
+    #[test]
+    fn probes_record_each_layers_input_range_and_change_no_bit() {
+        let model = linear_model(&[2, 50], 130, 33, true, true);
+        let inputs = input(&[2, 50, 130]);
+        let want = run_optimized(model.clone(), &inputs);
+        let log = RangeLog::default();
+        let (probed, done) = probe_linears(model.clone(), &log, "stage").unwrap();
+        assert_eq!(done, 1);
+        let got = run_optimized(probed, &inputs);
+        assert_eq!(bits(&got[0]), bits(&want[0]));
+        let ranges = log.ranges();
+        let name = layers(&model).unwrap()[0].1.clone();
+        assert_eq!(
+            ranges.get(&("stage".to_owned(), name)),
+            Some(&quantize::abs_max(&values(&inputs[0])))
+        );
+        assert_eq!(ranges.len(), 1);
+    }
+
+    #[test]
+    fn a_wrong_input_is_an_error_value() {
+        let op = QuantLinear::new(tvec![4, 3], &[1.0; 6], 2, None, 1.0, IntTier::Generic).unwrap();
+        let x = Tensor::zero::<f32>(&[4, 2]).unwrap();
+        assert!(op.eval_out_of_plan(tvec!(x.into_tvalue())).is_err());
+    }
 }

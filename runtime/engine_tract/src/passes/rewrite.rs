@@ -26,7 +26,7 @@ use super::{contraction, conv_direct, epilogue, fold, natural_consts};
 use crate::gemm;
 use crate::ops::{
     attention, batched, bilinear, broadcast, conv_unfold, gelu, layer_norm, linear, max_pool,
-    pointwise, softmax, weighted_sum,
+    pointwise, quant_linear, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage (`optimise`); serialised
@@ -51,6 +51,12 @@ pub struct Rewrites {
     /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on a native product tier only).
     pub unfolded_convs: usize,
+    /// Linear layers run in int8 as [`quant_linear::QuantLinear`] (an int8 bundle with
+    /// calibrated ranges; every target).
+    pub int8_linears: usize,
+    /// Range probes a calibration load put before linear layers
+    /// ([`quant_linear::probe_linears`]).
+    pub range_probes: usize,
     /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on a
     /// native product tier only).
     pub native_linears: usize,
@@ -98,9 +104,34 @@ pub(crate) enum Pass {
     NaturalConsts,
 }
 
+/// What a load does with the linear layers the int8 passes take.
+#[derive(Clone, Debug, Default)]
+pub enum Quantisation {
+    /// Nothing: the f32 passes.
+    #[default]
+    None,
+    /// Each layer with a range here (by its name) runs in int8 on this integer tier.
+    Int8 {
+        /// Largest activation magnitude per layer name (a stage's calibration).
+        ranges: std::collections::BTreeMap<String, f32>,
+        /// The integer tier.
+        tier: satmap_kernels::qgemm::IntTier,
+    },
+    /// Every layer gets a range probe into this log (a calibration run).
+    Observe {
+        /// Where the ranges go.
+        log: quant_linear::RangeLog,
+        /// The stage's name (the first half of each range's key).
+        stage: &'static str,
+    },
+}
+
 /// A decluttered stage through every rewrite and tract's optimiser: the graph the engine plans.
-pub(crate) fn optimise(model: TypedModel) -> TractResult<(TypedModel, Rewrites)> {
-    optimise_before(model, None)
+pub(crate) fn optimise(
+    model: TypedModel,
+    quantisation: &Quantisation,
+) -> TractResult<(TypedModel, Rewrites)> {
+    optimise_before(model, None, quantisation)
 }
 
 /// A decluttered stage through the rewrites that run before `stop` (all with `None`): the graph
@@ -109,6 +140,7 @@ pub(crate) fn optimise(model: TypedModel) -> TractResult<(TypedModel, Rewrites)>
 pub(crate) fn optimise_before(
     mut model: TypedModel,
     stop: Option<Pass>,
+    quantisation: &Quantisation,
 ) -> TractResult<(TypedModel, Rewrites)> {
     let runs = |pass: Pass| stop.is_none_or(|s| pass < s);
     let mut done = Rewrites::default();
@@ -140,6 +172,19 @@ pub(crate) fn optimise_before(
         // Products over several axes at once reshaped into linear layers first (a layout
         // change, not counted).
         (model, _) = contraction::merge_contracted_axes(model)?;
+    }
+    // Before the f32 linear layers take them: the int8 layers (or the calibration's probes)
+    // on every target, whether or not the f32 product is native here.
+    match quantisation {
+        Quantisation::None => {}
+        Quantisation::Int8 { ranges, tier } => {
+            (model, done.int8_linears) = quant_linear::quantise_linears(model, ranges, *tier)?;
+        }
+        Quantisation::Observe { log, stage } => {
+            (model, done.range_probes) = quant_linear::probe_linears(model, log, stage)?;
+        }
+    }
+    if runs(Pass::NativeLinears) && native {
         (model, done.native_linears) = linear::native_linears(model)?;
     }
     if runs(Pass::PointwiseConvs) && native {

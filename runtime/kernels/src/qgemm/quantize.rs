@@ -146,7 +146,9 @@ mod tests {
     #[test]
     fn int8_weights_times_scales_come_back_exactly() {
         let (k, n) = (7, 5);
-        let mut q: Vec<i8> = (0..k * n).map(|i| ((i * 37 % 255) as i32 - 127) as i8).collect();
+        let mut q: Vec<i8> = (0..k * n)
+            .map(|i| ((i * 37 % 255) as i32 - 127) as i8)
+            .collect();
         // Each column reaches +-127, as a per-column symmetric quantiser's output does.
         for c in 0..n {
             q[3 * n + c] = if c % 2 == 0 { 127 } else { -127 };
