@@ -3,6 +3,7 @@
 //! and put on the engine's threads, and the backend codes of its errors.
 
 use super::*;
+use crate::passes::rewrite::Quantisation;
 
 /// One loaded stage: its plan's reused state and its input tensors.
 pub(super) struct StageRunner {

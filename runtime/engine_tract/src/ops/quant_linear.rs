@@ -11,8 +11,8 @@
 //! folds the largest `|x|` it sees into a [`RangeLog`] under the layer's name: what
 //! `satmap-sim compile --calibrate` records over frames of the training split.
 //!
-//! Both passes choose layers with the same rule ([`layers`]): every linear layer the native f32
-//! product would take ([`Layer::is_native`]), keyed by its `EinSum` node's name in the
+//! Both passes choose layers with the same rule (`layers`): every linear layer the native f32
+//! product would take (`Layer::is_native`), keyed by its `EinSum` node's name in the
 //! decluttered graph, which is the same in every load of the same stage.
 
 use std::collections::BTreeMap;
@@ -274,7 +274,7 @@ fn layer_at(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     Ok(as_layer(model, id)?.filter(Layer::is_native))
 }
 
-/// Replace every layer [`layers`] finds that has a range in `ranges` by a [`QuantLinear`] on
+/// Replace every layer `layers` finds that has a range in `ranges` by a [`QuantLinear`] on
 /// `tier`, its bias `Add` taken in; returns the model and the number replaced.
 ///
 /// # Errors
@@ -315,7 +315,7 @@ pub fn quantise_linears(
     Ok((model, done))
 }
 
-/// Put a [`RangeProbe`] into `log` before every layer [`layers`] finds in `stage`; returns the model and
+/// Put a [`RangeProbe`] into `log` before every layer `layers` finds in `stage`; returns the model and
 /// the number of probes.
 ///
 /// # Errors

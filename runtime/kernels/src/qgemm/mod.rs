@@ -3,7 +3,7 @@
 //!
 //! The bits, which `generic.rs` defines: each output's integer sum `sum_k a[r][k] * w[k][c]`
 //! is exact in i32 for `k <= MAX_K` (`128 * 128 * MAX_K <= 2^30`), so its order does not matter
-//! and every tier gives the same integer; the finish ([`finish_rows`]) is one portable function
+//! and every tier gives the same integer; the finish (`finish_rows`) is one portable function
 //! every tier shares: `v = (sum as f32) * scale[c]`, then `+ bias[c]`, then `+ residual`, then
 //! the floor, one f32 operation each. So every tier gives the generic tier's bits, always.
 //!
