@@ -60,7 +60,6 @@ pub use graph::load::{check_graph_io, engine_error, nnef_model, onnx_model};
 pub(crate) use graph::load::{confined, datum};
 pub use kernel_family::{KernelFamily, kernel_family};
 pub use ops::quant_linear::RangeLog;
-use passes::rewrite::Quantisation;
 pub use passes::rewrite::Rewrites;
 use runner::{StageRunner, on_engine_threads, panic_message};
 
