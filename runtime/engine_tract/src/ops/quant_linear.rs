@@ -22,6 +22,7 @@ use satmap_kernels::qgemm::{self, IntTier, PackedQB, QFinish, padded_k, quantize
 use tract_nnef::internal::*;
 
 use crate::graph::matching::replace_with_op;
+use crate::ops::finish::Epilogue;
 use crate::ops::linear::{Layer, as_layer, bias_after};
 use crate::pool;
 
@@ -35,6 +36,8 @@ pub struct QuantLinear {
     pub input: TVec<usize>,
     /// Outputs a token.
     pub n: usize,
+    /// The residual `Add` and ReLU after the bias ([`crate::passes::epilogue`]).
+    pub epilogue: Epilogue,
     /// `1 / activation scale`.
     inv_scale: f32,
     /// The activation's scale times each column's weight scale.
@@ -48,6 +51,7 @@ impl PartialEq for QuantLinear {
     fn eq(&self, other: &Self) -> bool {
         self.input == other.input
             && self.n == other.n
+            && self.epilogue == other.epilogue
             && self.inv_scale.to_bits() == other.inv_scale.to_bits()
             && self.tier == other.tier
             && Arc::ptr_eq(&self.weights, &other.weights)
@@ -77,12 +81,22 @@ impl QuantLinear {
         Ok(Self {
             input,
             n,
+            epilogue: Epilogue::default(),
             inv_scale: 1.0 / a_scale,
             col_scale: Arc::new(w_scales.iter().map(|&s| a_scale * s).collect()),
             weights: Arc::new(weights),
             bias: bias.map(Arc::new),
             tier,
         })
+    }
+
+    /// This layer with `epilogue` after its bias.
+    #[must_use]
+    pub fn with_epilogue(&self, epilogue: Epilogue) -> Self {
+        Self {
+            epilogue,
+            ..self.clone()
+        }
     }
 
     fn k(&self) -> usize {
@@ -125,7 +139,8 @@ impl EvalOp for QuantLinear {
     op_out_of_plan!();
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        ensure!(inputs.len() == 1, "QuantLinear takes one input");
+        let out_shape = self.output_shape();
+        let residual = self.epilogue.shortcut(&inputs, &out_shape)?;
         let x = &inputs[0];
         ensure!(
             x.shape() == &*self.input,
@@ -137,20 +152,20 @@ impl EvalOp for QuantLinear {
         let (k, n) = (self.k(), self.n);
         let m = xs.len() / k.max(1);
         let kp = padded_k(k);
-        let mut out = crate::gemm::output_tensor(&self.output_shape())?;
+        let mut out = crate::gemm::output_tensor(&out_shape)?;
         let mut po = out.try_as_plain_ram_mut()?;
         let c = po.as_slice_mut::<f32>()?;
-        let finish = QFinish {
-            scale: &self.col_scale,
-            bias: self.bias.as_deref().map(Vec::as_slice),
-            residual: None,
-            floor: None,
-        };
         let parallel = pool::worth_threads(m * k * n);
         let done = pool::on_threads(parallel, c, BAND_ROWS * n.max(1), |i, band| {
             let r0 = i * BAND_ROWS;
             let rows = band.len() / n.max(1);
             let x = &xs[r0 * k..(r0 + rows) * k];
+            let finish = QFinish {
+                scale: &self.col_scale,
+                bias: self.bias.as_deref().map(Vec::as_slice),
+                residual: residual.map(|r| (&r[r0 * n..], n)),
+                floor: self.epilogue.floor,
+            };
             ROWS.with(|buf| {
                 let mut buf = buf.borrow_mut();
                 if buf.len() < rows * kp {
@@ -168,8 +183,7 @@ impl EvalOp for QuantLinear {
 
 impl TypedOp for QuantLinear {
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        ensure!(inputs.len() == 1 && inputs[0].datum_type == f32::datum_type());
-        Ok(tvec!(f32::fact(self.output_shape())))
+        self.epilogue.output_facts(inputs, &self.output_shape())
     }
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
@@ -451,6 +465,35 @@ mod tests {
             Some(&quantize::abs_max(&values(&inputs[0])))
         );
         assert_eq!(ranges.len(), 1);
+    }
+
+    #[test]
+    fn the_fused_residual_and_floor_give_the_unfused_bits() {
+        let (m, k, n) = (70, 40, 19);
+        let w: Vec<f32> = (0..k * n)
+            .map(|i| ((i * 13) % 29) as f32 / 14.0 - 1.0)
+            .collect();
+        let bias: Vec<f32> = (0..n).map(|i| i as f32 / 7.0 - 1.0).collect();
+        let op =
+            QuantLinear::new(tvec![m, k], &w, n, Some(bias), 1.0, IntTier::default_here()).unwrap();
+        let x = input(&[m, k]);
+        let res: Vec<f32> = (0..m * n)
+            .map(|i| ((i * 7) % 11) as f32 / 5.0 - 1.0)
+            .collect();
+        let plain = values(&op.eval_out_of_plan(x.clone()).unwrap().unwrap()[0]);
+        let want: Vec<u32> = plain
+            .iter()
+            .zip(&res)
+            .map(|(&v, &r)| satmap_kernels::gemm::floor(v + r, 0.0).to_bits())
+            .collect();
+        let fused = op.with_epilogue(Epilogue {
+            residual: true,
+            floor: Some(0.0),
+        });
+        let mut inputs = x;
+        inputs.push(Tensor::from_shape(&[m, n], &res).unwrap().into_tvalue());
+        let got = fused.eval_out_of_plan(inputs).unwrap().unwrap();
+        assert_eq!(bits(&got[0]), want);
     }
 
     #[test]

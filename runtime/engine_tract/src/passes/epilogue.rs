@@ -9,7 +9,7 @@
 //! that left L2 between the convolution and them, and on one thread while the products ran
 //! on all); so are the feed-forward layers' ReLUs and residual `Add`s after a [`PackedLinear`]
 //! (`nano`'s BEV encoder: 1.7 of 19.9 ms). [`fuse_epilogues`] takes them into the
-//! [`UnfoldConv`], [`PointwiseConv`] or [`PackedLinear`] before them: the product's
+//! [`UnfoldConv`], [`PointwiseConv`], [`PackedLinear`] or [`QuantLinear`] before them: the product's
 //! micro-kernel adds the shortcut and applies the floor to each tile while it is still in
 //! registers ([`crate::gemm::Finish`]).
 //!
@@ -29,12 +29,14 @@ use crate::ops::conv_unfold::UnfoldConv;
 use crate::ops::finish::Epilogue;
 use crate::ops::linear::PackedLinear;
 use crate::ops::pointwise::PointwiseConv;
+use crate::ops::quant_linear::QuantLinear;
 
 /// The native products that take an [`Epilogue`].
 enum Finishable<'a> {
     Unfold(&'a UnfoldConv),
     Pointwise(&'a PointwiseConv),
     Linear(&'a PackedLinear),
+    Int8Linear(&'a QuantLinear),
 }
 
 impl Finishable<'_> {
@@ -43,6 +45,8 @@ impl Finishable<'_> {
             Some(Finishable::Unfold(op))
         } else if let Some(op) = node.op_as::<PointwiseConv>() {
             Some(Finishable::Pointwise(op))
+        } else if let Some(op) = node.op_as::<QuantLinear>() {
+            Some(Finishable::Int8Linear(op))
         } else {
             node.op_as::<PackedLinear>().map(Finishable::Linear)
         }
@@ -53,6 +57,7 @@ impl Finishable<'_> {
             Finishable::Unfold(op) => op.epilogue,
             Finishable::Pointwise(op) => op.epilogue,
             Finishable::Linear(op) => op.epilogue,
+            Finishable::Int8Linear(op) => op.epilogue,
         }
     }
 
@@ -61,6 +66,7 @@ impl Finishable<'_> {
             Finishable::Unfold(op) => Box::new(op.with_epilogue(epilogue)),
             Finishable::Pointwise(op) => Box::new(op.with_epilogue(epilogue)),
             Finishable::Linear(op) => Box::new(op.with_epilogue(epilogue)),
+            Finishable::Int8Linear(op) => Box::new(op.with_epilogue(epilogue)),
         }
     }
 }

@@ -65,6 +65,7 @@ impl TileFinish<'_> {
 /// x86, which the rewrites replace): `s` for a NaN `v`, else `s > v ? s : v` (so `v` for equal
 /// zeros). Every tier's floor computes this, on every instruction set.
 #[must_use]
+#[inline(always)]
 pub fn floor(v: f32, s: f32) -> f32 {
     if v.is_nan() || s > v { s } else { v }
 }

@@ -8,7 +8,7 @@ use core::arch::aarch64::*;
 use core::arch::asm;
 
 use super::pack::Line;
-use super::{IntSums, QNR};
+use super::{IntSums, Job, QNR, drive};
 
 /// Rows of one pass.
 const PASS_ROWS: usize = 4;
@@ -30,13 +30,27 @@ fn sdot(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
     acc
 }
 
+/// The whole product with the dot-product instructions.
+///
+/// # Safety
+/// The CPU has the dot-product instructions; `job`'s slices cover its sizes.
+#[target_feature(enable = "neon,dotprod")]
+pub(super) unsafe fn product(job: &Job<'_>, c: &mut [f32]) {
+    let kp = job.kp;
+    drive(job, c, false, |a, rows, lines, sums| {
+        // SAFETY: the caller's contract; `drive` passes `rows` rows of `kp` bytes.
+        unsafe { tile(a, kp, rows, lines, sums) }
+    });
+}
+
 /// The sums of `rows` rows of `a` against one panel's `lines`.
 ///
 /// # Safety
 /// The CPU has the dot-product instructions; `1 <= rows <= QMR`; `a` holds `rows` rows of `kp`
 /// bytes; `lines.len() == kp / 4`.
 #[target_feature(enable = "neon,dotprod")]
-pub(super) unsafe fn tile(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut IntSums) {
+#[inline]
+unsafe fn tile(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut IntSums) {
     const _: () = assert!(QNR == 16);
     for r0 in (0..rows).step_by(PASS_ROWS) {
         let mut acc = [[vdupq_n_s32(0); 4]; PASS_ROWS];

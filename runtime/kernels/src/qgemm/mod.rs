@@ -112,41 +112,85 @@ pub fn product(
         check("residual", res.len(), (rows - 1) * ld + n)?;
         check("residual ld", ld, n)?;
     }
+    let job = Job {
+        a,
+        kp,
+        rows,
+        b,
+        finish,
+        ldc,
+    };
+    match tier {
+        IntTier::Generic => drive(&job, c, false, |a, rows, lines, sums| {
+            generic::tile(a, kp, rows, lines, sums);
+        }),
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: AVX-512 VNNI is present (`runs_here`); the slices cover the sizes (checked
+        // above, and `PackedQB` holds `kp / 4` lines a panel).
+        IntTier::X86_64Avx512Vnni => unsafe { x86_64_vnni::product_512(&job, c) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above, with AVX-VNNI.
+        IntTier::X86_64AvxVnni => unsafe { x86_64_vnni::product_256(&job, c) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above, with AVX2.
+        IntTier::X86_64Avx2 => unsafe { x86_64_avx2::product(&job, c) },
+        #[cfg(target_arch = "aarch64")]
+        // SAFETY: as above, with the dot-product instructions.
+        IntTier::Aarch64Dotprod => unsafe { aarch64_dotprod::product(&job, c) },
+        // Tiers of another architecture never run here (`runs_here`).
+        #[allow(unreachable_patterns)]
+        _ => return Err(QProductError::TierAbsent { tier }),
+    }
+    Ok(())
+}
+
+/// One checked product: what every tier's driver walks.
+pub(crate) struct Job<'a> {
+    /// The activation rows (`rows x kp`).
+    pub a: &'a [i8],
+    /// Bytes an activation row.
+    pub kp: usize,
+    /// Rows.
+    pub rows: usize,
+    /// The weights.
+    pub b: &'a PackedQB,
+    /// The finish.
+    pub finish: QFinish<'a>,
+    /// C's row stride.
+    pub ldc: usize,
+}
+
+/// The product over tiles of [`QMR`] rows and one panel: `tile` sums a tile (its activation
+/// rows, their count, the panel's lines), then the offset of the unsigned tiers is taken away
+/// and the tile finished. Inlined into each tier's entry (compiled with that tier's features),
+/// so the finish is vectorised for the tier's registers; every step is exact integer
+/// arithmetic or one IEEE operation, so every build gives the same bits.
+#[inline(always)]
+pub(crate) fn drive(
+    job: &Job<'_>,
+    c: &mut [f32],
+    offset: bool,
+    mut tile: impl FnMut(&[i8], usize, &[pack::Line], &mut IntSums),
+) {
+    let Job {
+        a,
+        kp,
+        rows,
+        b,
+        finish,
+        ldc,
+    } = *job;
+    let n = b.n();
     let mut sums: IntSums = [[0; QNR]; QMR];
     for r0 in (0..rows).step_by(QMR) {
         let tile_rows = (rows - r0).min(QMR);
         let a_tile = &a[r0 * kp..(r0 + tile_rows) * kp];
         for panel in 0..b.panels() {
-            let lines = b.panel(panel);
-            match tier {
-                IntTier::Generic => generic::tile(a_tile, kp, tile_rows, lines, &mut sums),
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: AVX-512 VNNI is present (`runs_here`); `a_tile` holds `tile_rows`
-                // rows of `kp` and the panel `kp / 4` lines (checked above, `PackedQB`).
-                IntTier::X86_64Avx512Vnni => unsafe {
-                    x86_64_vnni::tile_512(a_tile, kp, tile_rows, lines, &mut sums);
-                },
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: as above, with AVX-VNNI.
-                IntTier::X86_64AvxVnni => unsafe {
-                    x86_64_vnni::tile_256(a_tile, kp, tile_rows, lines, &mut sums);
-                },
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: as above, with AVX2.
-                IntTier::X86_64Avx2 => unsafe {
-                    x86_64_avx2::tile(a_tile, kp, tile_rows, lines, &mut sums);
-                },
-                #[cfg(target_arch = "aarch64")]
-                // SAFETY: as above, with the dot-product instructions.
-                IntTier::Aarch64Dotprod => unsafe {
-                    aarch64_dotprod::tile(a_tile, kp, tile_rows, lines, &mut sums);
-                },
-                // Tiers of another architecture never run here (`runs_here`).
-                #[allow(unreachable_patterns)]
-                _ => return Err(QProductError::TierAbsent { tier }),
-            }
-            if tier.offsets_activations() {
-                let comp = &b.col_sums()[panel * QNR..][..QNR];
+            tile(a_tile, tile_rows, b.panel(panel), &mut sums);
+            if offset {
+                let comp: &[i32; QNR] = b.col_sums()[panel * QNR..][..QNR]
+                    .try_into()
+                    .unwrap_or(&[0; QNR]);
                 for row in sums.iter_mut().take(tile_rows) {
                     for (s, &cs) in row.iter_mut().zip(comp) {
                         *s = s.wrapping_sub(cs.wrapping_mul(128));
@@ -158,7 +202,6 @@ pub fn product(
             finish_rows(&sums, (r0, tile_rows), (col0, cols), finish, c, ldc);
         }
     }
-    Ok(())
 }
 
 fn check(what: &'static str, len: usize, needed: usize) -> Result<(), QProductError> {
@@ -170,7 +213,9 @@ fn check(what: &'static str, len: usize, needed: usize) -> Result<(), QProductEr
 }
 
 /// The finish of one tile's integer sums into `c`, shared by every tier: scale, bias,
-/// residual, floor, one f32 operation each.
+/// residual, floor, one f32 operation each, on whole 16-value rows (an edge panel's values
+/// padded into a local row) so that the compiler vectorises them.
+#[inline(always)]
 fn finish_rows(
     sums: &IntSums,
     (r0, rows): (usize, usize),
@@ -179,21 +224,35 @@ fn finish_rows(
     c: &mut [f32],
     ldc: usize,
 ) {
-    let scale = &finish.scale[col0..][..cols];
+    let padded = |src: &[f32]| -> [f32; QNR] {
+        let mut row = [0.0f32; QNR];
+        row[..cols].copy_from_slice(&src[col0..][..cols]);
+        row
+    };
+    let scale = padded(finish.scale);
+    let bias = finish.bias.map(padded);
     for (r, row) in sums.iter().enumerate().take(rows) {
-        let out = &mut c[(r0 + r) * ldc + col0..][..cols];
-        for (j, (o, (&s, &sc))) in out.iter_mut().zip(row.iter().zip(scale)).enumerate() {
-            let mut v = s as f32 * sc;
-            if let Some(bias) = finish.bias {
-                v += bias[col0 + j];
-            }
-            if let Some((res, ld)) = finish.residual {
-                v += res[(r0 + r) * ld + col0 + j];
-            }
-            *o = match finish.floor {
-                Some(f) => floor(v, f),
-                None => v,
-            };
+        let mut v = [0.0f32; QNR];
+        for ((v, &s), &sc) in v.iter_mut().zip(row).zip(&scale) {
+            *v = s as f32 * sc;
         }
+        if let Some(bias) = &bias {
+            for (v, &b) in v.iter_mut().zip(bias) {
+                *v += b;
+            }
+        }
+        if let Some((res, ld)) = finish.residual {
+            let mut add = [0.0f32; QNR];
+            add[..cols].copy_from_slice(&res[(r0 + r) * ld + col0..][..cols]);
+            for (v, &x) in v.iter_mut().zip(&add) {
+                *v += x;
+            }
+        }
+        if let Some(f) = finish.floor {
+            for v in &mut v {
+                *v = floor(*v, f);
+            }
+        }
+        c[(r0 + r) * ldc + col0..][..cols].copy_from_slice(&v[..cols]);
     }
 }

@@ -21,10 +21,14 @@ const ROUNDER: f32 = 12_582_912.0;
 #[inline(always)]
 #[must_use]
 pub fn quantize(x: f32, inv_scale: f32) -> i8 {
-    let v = (x * inv_scale).clamp(-Q_MAX, Q_MAX);
+    let v = x * inv_scale;
+    // Branch-free selects, so the compiler vectorises the loop: NaN to 0, then the clamp.
+    let v = if v.is_nan() { 0.0 } else { v };
+    let v = if v < -Q_MAX { -Q_MAX } else { v };
+    let v = if v > Q_MAX { Q_MAX } else { v };
     let r = (v + ROUNDER) - ROUNDER;
-    // `r` is an integer in [-127, 127], or NaN, which `as` makes 0.
-    r as i32 as i8
+    // SAFETY: `r` is an integer in [-127, 127] (finite, not NaN: selected above).
+    unsafe { r.to_int_unchecked::<i32>() as i8 }
 }
 
 /// The scale a symmetric range `[-abs_max, abs_max]` maps onto `[-127, 127]` with (1 for an

@@ -52,12 +52,6 @@ impl IntTier {
         Self::ALL.into_iter().find(|t| t.name() == name)
     }
 
-    /// Whether the tier multiplies unsigned by signed bytes, so that its sums carry `128 *` the
-    /// column's weight sum to take away.
-    pub(crate) const fn offsets_activations(self) -> bool {
-        matches!(self, Self::X86_64AvxVnni | Self::X86_64Avx512Vnni)
-    }
-
     /// Whether this CPU has the tier's instructions.
     #[must_use]
     pub fn runs_here(self) -> bool {

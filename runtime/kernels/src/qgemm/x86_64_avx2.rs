@@ -7,10 +7,23 @@
 use core::arch::x86_64::*;
 
 use super::pack::Line;
-use super::{IntSums, QNR};
+use super::{IntSums, Job, QNR, drive};
 
 /// Rows of one pass.
 const PASS_ROWS: usize = 2;
+
+/// The whole product on AVX2.
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; `job`'s slices cover its sizes.
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn product(job: &Job<'_>, c: &mut [f32]) {
+    let kp = job.kp;
+    drive(job, c, false, |a, rows, lines, sums| {
+        // SAFETY: the caller's contract; `drive` passes `rows` rows of `kp` bytes.
+        unsafe { tile(a, kp, rows, lines, sums) }
+    });
+}
 
 /// The sums of `rows` rows of `a` against one panel's `lines`.
 ///
@@ -18,7 +31,8 @@ const PASS_ROWS: usize = 2;
 /// The CPU has AVX2; `1 <= rows <= QMR`; `a` holds `rows` rows of `kp` bytes; `lines.len() ==
 /// kp / 4`.
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn tile(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut IntSums) {
+#[inline]
+unsafe fn tile(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut IntSums) {
     const _: () = assert!(QNR == 16);
     for r0 in (0..rows).step_by(PASS_ROWS) {
         let mut acc = [[_mm256_setzero_si256(); 4]; PASS_ROWS];

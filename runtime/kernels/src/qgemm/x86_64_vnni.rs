@@ -1,81 +1,154 @@
 //! The VNNI tiers: `vpdpbusd` sums four unsigned-by-signed byte products into each i32 lane,
 //! so one instruction does four columns' four `k` values a lane. The activations are signed, so
 //! each broadcast group of four has its sign bits flipped (`a + 128` as unsigned) and the
-//! caller takes `128 * column sum` away afterwards ([`super::product`]); the wrapped i32
+//! driver takes `128 * column sum` away afterwards ([`super::drive`]); the wrapped i32
 //! arithmetic is exact modulo `2^32` and the true sum fits, so the result is exact.
 //!
 //! AVX-512: a tile's [`QMR`] rows are eight 16-lane accumulators, per group one load of the
-//! panel's line and eight broadcasts. AVX-VNNI (8 lanes): two passes of four rows, each eight
-//! accumulators and the line's two halves.
+//! panel's line and eight broadcasts (each a load with the flip). AVX-VNNI (8 lanes): two
+//! passes of four rows, each eight accumulators and the line's two halves.
 
 use core::arch::x86_64::*;
 
 use super::pack::Line;
-use super::{IntSums, QMR, QNR};
+use super::{IntSums, Job, QMR, QNR, drive};
 
-/// The four activation bytes of group `g` of row `r` (row `r` at `r * kp`) as one i32, sign
-/// bits flipped. Rows past `rows` read row 0 (their sums are never stored).
-///
-/// # Safety
-/// `a` holds `rows >= 1` rows of `kp` bytes and `4 * g + 4 <= kp`.
+/// The sign bits of four bytes.
+const FLIP: i32 = 0x8080_8080_u32 as i32;
+
+/// Each tile row's first byte: rows past `rows` read row 0 (their sums are never stored).
 #[inline(always)]
-unsafe fn group(a: &[i8], kp: usize, rows: usize, r: usize, g: usize) -> i32 {
-    let row = if r < rows { r } else { 0 };
-    // SAFETY: the caller's contract bounds the 4 bytes read.
-    let v = unsafe {
-        a.as_ptr()
-            .add(row * kp + 4 * g)
-            .cast::<i32>()
-            .read_unaligned()
-    };
-    v ^ (0x8080_8080_u32 as i32)
+fn row_starts(a: &[i8], kp: usize, rows: usize) -> [*const i8; QMR] {
+    core::array::from_fn(|r| {
+        let row = if r < rows { r } else { 0 };
+        a[row * kp..].as_ptr()
+    })
 }
 
-/// The sums of `rows` rows of `a` against one panel's `lines`, on AVX-512 VNNI.
+/// The whole product on AVX-512 VNNI: tiles of [`QMR`] rows and two panels (sixteen
+/// accumulators, per group two line loads and eight broadcasts), the last odd panel alone,
+/// each finished in registers: the offset taken away, then the finish's steps as
+/// [`super::finish_rows`] takes them, each one IEEE operation (the same bits), stored masked at
+/// the edge.
 ///
 /// # Safety
-/// The CPU has AVX-512F and AVX-512 VNNI; `1 <= rows <= QMR`; `a` holds `rows` rows of `kp`
-/// bytes; `lines.len() == kp / 4`.
-#[target_feature(enable = "avx512f,avx512vnni")]
-pub(super) unsafe fn tile_512(
-    a: &[i8],
-    kp: usize,
-    rows: usize,
-    lines: &[Line],
-    sums: &mut IntSums,
-) {
-    const _: () = assert!(QNR == 16);
-    let mut acc = [_mm512_setzero_si512(); QMR];
-    for (g, line) in lines.iter().enumerate() {
-        // SAFETY: a line is 64 bytes on a 64-byte boundary.
-        let b = unsafe { _mm512_load_si512(line.0.as_ptr().cast()) };
-        for (r, acc) in acc.iter_mut().enumerate() {
-            // SAFETY: the caller's contract (`4 * g + 4 <= kp`).
-            let x = _mm512_set1_epi32(unsafe { group(a, kp, rows, r, g) });
-            *acc = _mm512_dpbusd_epi32(*acc, x, b);
+/// The CPU has AVX-512F/BW and AVX-512 VNNI; `job`'s slices cover its sizes.
+#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+pub(super) unsafe fn product_512(job: &Job<'_>, c: &mut [f32]) {
+    let panels = job.b.panels();
+    for r0 in (0..job.rows).step_by(QMR) {
+        let mut p = 0;
+        while p + 2 <= panels {
+            // SAFETY: the caller's contract; rows `r0..` and panels `p, p + 1` exist.
+            unsafe { tile_512::<2>(job, c, r0, p) };
+            p += 2;
+        }
+        if p < panels {
+            // SAFETY: as above, panel `p` exists.
+            unsafe { tile_512::<1>(job, c, r0, p) };
         }
     }
-    for (row, acc) in sums.iter_mut().zip(acc).take(rows) {
-        // SAFETY: a row of sums is 16 i32.
-        unsafe { _mm512_storeu_si512(row.as_mut_ptr().cast(), acc) };
+}
+
+/// Rows `r0..r0 + QMR` (fewer at the end) of panels `p..p + P`, summed and finished into `c`.
+///
+/// # Safety
+/// As [`product_512`]; `r0 < job.rows`, `p + P <= job.b.panels()`.
+#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+#[inline]
+unsafe fn tile_512<const P: usize>(job: &Job<'_>, c: &mut [f32], r0: usize, p: usize) {
+    const _: () = assert!(QNR == 16);
+    let (kp, rows, n) = (job.kp, (job.rows - r0).min(QMR), job.b.n());
+    let starts = row_starts(&job.a[r0 * kp..], kp, rows);
+    let lines: [&[Line]; P] = core::array::from_fn(|h| job.b.panel(p + h));
+    let flip = _mm512_set1_epi32(FLIP);
+    let mut acc = [[_mm512_setzero_si512(); P]; QMR];
+    for g in 0..kp / 4 {
+        // SAFETY: each panel has `kp / 4` lines of 64 bytes on a 64-byte boundary.
+        let b: [__m512i; P] =
+            core::array::from_fn(|h| unsafe { _mm512_load_si512(lines[h][g].0.as_ptr().cast()) });
+        for (acc, &row) in acc.iter_mut().zip(&starts) {
+            // SAFETY: `4 * g + 4 <= kp`: four bytes of the row.
+            let v = unsafe { row.add(4 * g).cast::<i32>().read_unaligned() };
+            let x = _mm512_xor_si512(_mm512_set1_epi32(v), flip);
+            for (acc, &b) in acc.iter_mut().zip(&b) {
+                *acc = _mm512_dpbusd_epi32(*acc, x, b);
+            }
+        }
+    }
+    let f = job.finish;
+    for h in 0..P {
+        let col0 = (p + h) * QNR;
+        let cols = (n - col0).min(QNR);
+        let mask: __mmask16 = if cols == QNR { !0 } else { (1u16 << cols) - 1 };
+        // SAFETY: the column sums hold `QNR` a panel; the finish's vectors hold `n` values
+        // (checked by `product`), read masked past `cols`.
+        let (offset, scale) = unsafe {
+            (
+                _mm512_slli_epi32::<7>(_mm512_loadu_si512(
+                    job.b.col_sums()[col0..].as_ptr().cast(),
+                )),
+                _mm512_maskz_loadu_ps(mask, f.scale[col0..].as_ptr()),
+            )
+        };
+        let bias = match f.bias {
+            // SAFETY: as above.
+            Some(b) => Some(unsafe { _mm512_maskz_loadu_ps(mask, b[col0..].as_ptr()) }),
+            None => None,
+        };
+        let floor = match f.floor {
+            Some(s) => Some(_mm512_set1_ps(s)),
+            None => None,
+        };
+        for (r, acc) in acc.iter().enumerate().take(rows) {
+            let sum = _mm512_sub_epi32(acc[h], offset);
+            let mut v = _mm512_mul_ps(_mm512_cvtepi32_ps(sum), scale);
+            if let Some(bias) = bias {
+                v = _mm512_add_ps(v, bias);
+            }
+            if let Some((res, ld)) = f.residual {
+                // SAFETY: the residual holds `rows` rows of `ld >= n` (checked by `product`).
+                let x =
+                    unsafe { _mm512_maskz_loadu_ps(mask, res[(r0 + r) * ld + col0..].as_ptr()) };
+                v = _mm512_add_ps(v, x);
+            }
+            if let Some(s) = floor {
+                // `floor(v, s)`: `s` where `v` is NaN or `s > v`.
+                let take = _mm512_cmp_ps_mask::<_CMP_UNORD_Q>(v, v)
+                    | _mm512_cmp_ps_mask::<_CMP_GT_OQ>(s, v);
+                v = _mm512_mask_blend_ps(take, v, s);
+            }
+            // SAFETY: C holds `rows` rows of `ldc >= n` (checked by `product`), stored masked.
+            unsafe { _mm512_mask_storeu_ps(c[(r0 + r) * job.ldc + col0..].as_mut_ptr(), mask, v) };
+        }
     }
 }
 
 /// Rows of one AVX-VNNI pass.
 const PASS_ROWS: usize = 4;
 
+/// The whole product on AVX-VNNI.
+///
+/// # Safety
+/// The CPU has AVX2 and AVX-VNNI; `job`'s slices cover its sizes.
+#[target_feature(enable = "avx2,fma,avxvnni")]
+pub(super) unsafe fn product_256(job: &Job<'_>, c: &mut [f32]) {
+    let kp = job.kp;
+    drive(job, c, true, |a, rows, lines, sums| {
+        // SAFETY: the caller's contract; `drive` passes `rows` rows of `kp` bytes.
+        unsafe { tile_256(a, kp, rows, lines, sums) }
+    });
+}
+
 /// The sums of `rows` rows of `a` against one panel's `lines`, on AVX-VNNI.
 ///
 /// # Safety
-/// The CPU has AVX2 and AVX-VNNI; otherwise as [`tile_512`].
+/// As [`product_256`]; otherwise as [`tile_512`].
 #[target_feature(enable = "avx2,avxvnni")]
-pub(super) unsafe fn tile_256(
-    a: &[i8],
-    kp: usize,
-    rows: usize,
-    lines: &[Line],
-    sums: &mut IntSums,
-) {
+#[inline]
+unsafe fn tile_256(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut IntSums) {
+    let starts = row_starts(a, kp, rows);
+    let flip = _mm256_set1_epi32(FLIP);
     for r0 in (0..rows).step_by(PASS_ROWS) {
         let mut acc = [[_mm256_setzero_si256(); 2]; PASS_ROWS];
         for (g, line) in lines.iter().enumerate() {
@@ -83,8 +156,9 @@ pub(super) unsafe fn tile_256(
             // SAFETY: a line is 64 bytes on a 64-byte boundary: two aligned 32-byte halves.
             let (b0, b1) = unsafe { (_mm256_load_si256(p), _mm256_load_si256(p.add(1))) };
             for (r, acc) in acc.iter_mut().enumerate() {
-                // SAFETY: the caller's contract (`4 * g + 4 <= kp`).
-                let x = _mm256_set1_epi32(unsafe { group(a, kp, rows, r0 + r, g) });
+                // SAFETY: `4 * g + 4 <= kp`: four bytes of a row (`r0 + r < QMR`).
+                let v = unsafe { starts[r0 + r].add(4 * g).cast::<i32>().read_unaligned() };
+                let x = _mm256_xor_si256(_mm256_set1_epi32(v), flip);
                 acc[0] = _mm256_dpbusd_avx_epi32(acc[0], x, b0);
                 acc[1] = _mm256_dpbusd_avx_epi32(acc[1], x, b1);
             }
