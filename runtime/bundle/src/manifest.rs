@@ -56,10 +56,11 @@ pub enum Precision {
     /// f16 weights, widened to f32 when the graph is optimised at load: half the flash, the
     /// same f32 arithmetic on a target without f16 compute (x86 here).
     F16,
-    /// int8 weights with one f32 scale per output channel, widened to f32 when the graph is
-    /// optimised at load: a quarter of the f32 weight flash, f32 arithmetic (on tract 0.23.9
-    /// integer arithmetic was measured slower on every stage: `docs/int8.md`). A folder bundle
-    /// of quantised ONNX stages may say int8 too; it runs through the ONNX engine only.
+    /// int8 weights with one f32 scale per output channel: a quarter of the f32 weight flash.
+    /// Widened to f32 when the graph is optimised at load (W8A32), unless the manifest has
+    /// calibrated activation ranges ([`Manifest::int8`]): then its linear layers run in int8
+    /// with i32 sums on the engine's integer product (W8A8, `docs/int8.md`). A folder bundle of
+    /// quantised ONNX stages may say int8 too; it runs through the ONNX engine only.
     Int8,
 }
 

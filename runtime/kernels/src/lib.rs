@@ -3,7 +3,8 @@
 //! chooses the tier ([`tier`]). May import: std only (no tract, no runtime crate).
 //!
 //! The f32 product's micro-kernel and its packed operand formats ([`gemm`]), with tiers for
-//! AVX-512F, AVX2 + FMA and NEON; and the row kernels of the engine's other native ops, each one
+//! AVX-512F, AVX2 + FMA and NEON; the int8 product ([`qgemm`]: exact i32 sums, so its tiers,
+//! AVX-512 VNNI, AVX-VNNI, AVX2 and aarch64 `sdot`, give its generic tier's bits); and the row kernels of the engine's other native ops, each one
 //! portable implementation that defines the bits (its order is the contract; the compiler
 //! vectorises it): the softmax's reductions in tract's orders ([`softmax`]), max pooling
 //! ([`pooling`]) and the deformable samplers ([`sampling`]). Every tier computes every output as the same fused
