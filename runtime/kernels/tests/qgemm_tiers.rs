@@ -167,6 +167,52 @@ pub fn extremes(tier: IntTier) {
     run_case(tier, &a, &w, (rows, k, n), Finishing::BiasResidualFloor, 8);
 }
 
+pub fn special_residuals(tier: IntTier) {
+    // The finish's float steps on values the sums never make: NaN and infinite residuals, and
+    // sums the floor cuts, with the floor's NaN rule (a NaN becomes the floor).
+    let (rows, k, n) = (9, 20, 33);
+    let a = bytes(rows * k, 91);
+    let w = bytes(k * n, 92);
+    let b = PackedQB::pack(&w, k, n).unwrap();
+    let scale = vec![0.01f32; n];
+    let bias = floats(n, 93);
+    let mut residual = floats(rows * n, 94);
+    for (i, r) in residual.iter_mut().enumerate() {
+        *r = match i % 7 {
+            0 => f32::NAN,
+            1 => f32::INFINITY,
+            2 => f32::NEG_INFINITY,
+            3 => -0.0,
+            _ => *r,
+        };
+    }
+    for fl in [None, Some(0.0f32), Some(-1.5)] {
+        let want = reference(
+            &a,
+            &w,
+            (rows, k, n),
+            &scale,
+            Some(&bias),
+            Some(&residual),
+            fl,
+        );
+        let mut c = vec![0.0f32; rows * n];
+        let finish = QFinish {
+            scale: &scale,
+            bias: Some(&bias),
+            residual: Some((&residual, n)),
+            floor: fl,
+        };
+        qgemm::product(tier, &padded(&a, rows, k), rows, &b, finish, &mut c, n).unwrap();
+        let bits = |v: &[f32]| -> Vec<u32> {
+            v.iter()
+                .map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() })
+                .collect()
+        };
+        assert_eq!(bits(&c), bits(&want), "{tier} floor {fl:?}");
+    }
+}
+
 pub fn refuses_short_slices(tier: IntTier) {
     let (rows, k, n) = (3, 5, 17);
     let b = PackedQB::pack(&bytes(k * n, 1), k, n).unwrap();
@@ -213,6 +259,12 @@ macro_rules! int_tier_tests {
             #[cfg_attr(not($ran), ignore = $why)]
             fn extreme_values_equal_the_reference() {
                 super::extremes($tier);
+            }
+
+            #[test]
+            #[cfg_attr(not($ran), ignore = $why)]
+            fn special_residuals_and_the_floor_equal_the_reference() {
+                super::special_residuals($tier);
             }
 
             #[test]
