@@ -63,6 +63,8 @@ unsafe fn tile_512<const P: usize>(job: &Job<'_>, c: &mut [f32], r0: usize, p: u
     let lines: [&[Line]; P] = core::array::from_fn(|h| job.b.panel(p + h));
     let flip = _mm512_set1_epi32(FLIP);
     let mut acc = [[_mm512_setzero_si512(); P]; QMR];
+    // `g` walks the same line of each of the `P` panels.
+    #[allow(clippy::needless_range_loop)]
     for g in 0..kp / 4 {
         // SAFETY: each panel has `kp / 4` lines of 64 bytes on a 64-byte boundary.
         let b: [__m512i; P] =
@@ -91,15 +93,11 @@ unsafe fn tile_512<const P: usize>(job: &Job<'_>, c: &mut [f32], r0: usize, p: u
                 _mm512_maskz_loadu_ps(mask, f.scale[col0..].as_ptr()),
             )
         };
-        let bias = match f.bias {
-            // SAFETY: as above.
-            Some(b) => Some(unsafe { _mm512_maskz_loadu_ps(mask, b[col0..].as_ptr()) }),
-            None => None,
-        };
-        let floor = match f.floor {
-            Some(s) => Some(_mm512_set1_ps(s)),
-            None => None,
-        };
+        // SAFETY: as above.
+        let bias = f
+            .bias
+            .map(|b| unsafe { _mm512_maskz_loadu_ps(mask, b[col0..].as_ptr()) });
+        let floor = f.floor.map(|s| _mm512_set1_ps(s));
         for (r, acc) in acc.iter().enumerate().take(rows) {
             let sum = _mm512_sub_epi32(acc[h], offset);
             let mut v = _mm512_mul_ps(_mm512_cvtepi32_ps(sum), scale);
