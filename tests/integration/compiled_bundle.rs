@@ -446,26 +446,10 @@ const INT8_MAPS: MapBounds = MapBounds {
 /// `bounds` of the f32 bundle's; and the f32 bundle against itself deviates by nothing at all.
 fn maps_stay_close_to_f32(precision: Precision, bounds: &MapBounds) {
     use satmap_sim::eval::deviation::deviation;
-    use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay};
-    use satmap_sim::route_pack_builder::TileCompression;
+    use satmap_sim::harness::{ReplayConfig, replay};
 
-    let run = |bundle: std::path::PathBuf| {
-        let cfg = ReplayConfig {
-            bundle_dir: bundle,
-            scenario: ScenarioInput::Synthetic {
-                seed: 1,
-                speed_mps: 8.0,
-                drive_hz: 2.0,
-            },
-            frames: 8,
-            rate_hz: 1e6 / layout::STEP_PERIOD_US as f64,
-            max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
-            show_progress: false,
-            pack_compression: TileCompression::Raw,
-            threads: std::num::NonZeroUsize::MIN,
-        };
-        replay(&cfg, None).unwrap()
-    };
+    let run =
+        |bundle: std::path::PathBuf| replay(&ReplayConfig::synthetic(bundle, 1, 8), None).unwrap();
     let full = run(committed());
     let low = run(compiled_path(precision));
     let same = deviation(&full.maps, &full.maps);

@@ -8,7 +8,6 @@ use std::path::PathBuf;
 
 use satmap_ecu_tests::golden::compiled_path;
 use satmap_runtime::bundle::{Bundle, Precision};
-use satmap_runtime::capacity::layout;
 use satmap_runtime::engine::Stage;
 use satmap_runtime::engine_tract::{Int8Arithmetic, LoadOptions, TractEngine};
 use satmap_sim::cli::compile::{calibrate, check_calibration};
@@ -107,21 +106,13 @@ const W8A8_MAP_DROP_POINTS: f64 = 1.0;
 #[test]
 fn its_maps_stay_within_measured_bounds_of_f32_over_a_replay() {
     let run = |bundle: PathBuf| {
-        let cfg = ReplayConfig {
-            bundle_dir: bundle,
-            scenario: ScenarioInput::Synthetic {
-                seed: 1,
-                speed_mps: 8.0,
-                drive_hz: 2.0,
-            },
-            frames: 8,
-            rate_hz: 1e6 / layout::STEP_PERIOD_US as f64,
-            max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
-            show_progress: false,
-            pack_compression: TileCompression::Raw,
-            threads: std::num::NonZeroUsize::MIN,
-        };
-        replay_with(&cfg, None, None, &LoadOptions::default()).unwrap()
+        replay_with(
+            &ReplayConfig::synthetic(bundle, 1, 8),
+            None,
+            None,
+            &LoadOptions::default(),
+        )
+        .unwrap()
     };
     let full = run(compiled_path(Precision::F32));
     let low = run(w8a8_path());

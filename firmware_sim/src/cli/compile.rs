@@ -11,9 +11,8 @@ use satmap_runtime::engine_tract::{LoadOptions, RangeLog, TractEngine};
 use satmap_runtime::translate::{compile, with_calibration};
 
 use crate::cli::export_dataset::{SeedRange, TRAIN_SEEDS};
+use crate::harness::ReplayConfig;
 use crate::harness::replay_with;
-use crate::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput};
-use crate::route_pack_builder::TileCompression;
 
 use crate::cli::memory_map::{built_in_layout_line, read_layout};
 
@@ -83,20 +82,7 @@ pub fn calibrate(bundle: &Path, seeds: SeedRange, frames: usize) -> Result<Int8C
         ..LoadOptions::default()
     };
     for seed in seeds.seeds() {
-        let cfg = ReplayConfig {
-            bundle_dir: bundle.to_path_buf(),
-            scenario: ScenarioInput::Synthetic {
-                seed,
-                speed_mps: 8.0,
-                drive_hz: 2.0,
-            },
-            frames,
-            rate_hz: 1e6 / satmap_runtime::capacity::layout::STEP_PERIOD_US as f64,
-            max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
-            show_progress: false,
-            pack_compression: TileCompression::Raw,
-            threads: std::num::NonZeroUsize::MIN,
-        };
+        let cfg = ReplayConfig::synthetic(bundle.to_path_buf(), seed, frames);
         replay_with(&cfg, None, None, &options)
             .with_context(|| format!("calibration drive of world {seed}"))?;
     }

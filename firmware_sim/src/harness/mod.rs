@@ -106,6 +106,29 @@ pub struct ReplayConfig {
     pub threads: NonZeroUsize,
 }
 
+impl ReplayConfig {
+    /// `frames` steps of the synthetic drive of world `seed` (8 m/s sampled at 2 Hz, the
+    /// dataset's) through `bundle`, at the layout's step rate, raw tiles, one engine thread, no
+    /// progress bar: the replay the precision checks and calibration run.
+    #[must_use]
+    pub fn synthetic(bundle: PathBuf, seed: u64, frames: usize) -> Self {
+        Self {
+            bundle_dir: bundle,
+            scenario: ScenarioInput::Synthetic {
+                seed,
+                speed_mps: 8.0,
+                drive_hz: 2.0,
+            },
+            frames,
+            rate_hz: 1e6 / satmap_runtime::capacity::layout::STEP_PERIOD_US as f64,
+            max_degraded_share: DEFAULT_MAX_DEGRADED_SHARE,
+            show_progress: false,
+            pack_compression: TileCompression::Raw,
+            threads: NonZeroUsize::MIN,
+        }
+    }
+}
+
 /// What the pictures of a replay are made from (the last step).
 #[derive(Clone, Debug)]
 pub struct LastStep {

@@ -196,20 +196,8 @@ pub fn with_calibration(
             why: "activation ranges go into a compiled int8 bundle",
         });
     }
-    let path = bundle.path().join(MANIFEST_FILE);
-    let manifest_err = |message: String| BundleError::Manifest {
-        path: path.clone(),
-        message,
-    };
-    let text =
-        std::str::from_utf8(bundle.manifest_bytes()).map_err(|e| manifest_err(e.to_string()))?;
-    // The comment line that says who wrote it, kept.
-    let header = text
-        .lines()
-        .next()
-        .filter(|l| l.starts_with('#'))
-        .unwrap_or("#");
-    let mut table: toml::Table = toml::from_str(text).map_err(|e| manifest_err(e.to_string()))?;
+    let manifest_err = |message: String| manifest_error(bundle, message);
+    let (mut table, header) = manifest_table(bundle)?;
     let int8 = toml::Table::try_from(calibration).map_err(|e| manifest_err(e.to_string()))?;
     table.insert("int8".into(), int8.into());
     let body = toml::to_string(&table).map_err(|e| manifest_err(e.to_string()))?;
@@ -228,6 +216,29 @@ pub fn with_calibration(
     Ok(bytes)
 }
 
+/// A manifest error of `bundle`, naming its manifest file.
+fn manifest_error(bundle: &Bundle, message: String) -> BundleError {
+    BundleError::Manifest {
+        path: bundle.path().join(MANIFEST_FILE),
+        message,
+    }
+}
+
+/// `bundle`'s manifest as a TOML table, with its first line when that is a comment (the line
+/// that says who wrote it; `#` otherwise).
+fn manifest_table(bundle: &Bundle) -> Result<(toml::Table, String), BundleError> {
+    let text = std::str::from_utf8(bundle.manifest_bytes())
+        .map_err(|e| manifest_error(bundle, e.to_string()))?;
+    let header = text
+        .lines()
+        .next()
+        .filter(|l| l.starts_with('#'))
+        .unwrap_or("#")
+        .to_owned();
+    let table = toml::from_str(text).map_err(|e| manifest_error(bundle, e.to_string()))?;
+    Ok((table, header))
+}
+
 /// The folder's manifest with each stage's `file` and `sha256` pointing at its NNEF entry; the
 /// `[model]` table and every interface are carried over as written.
 fn compiled_manifest(
@@ -235,14 +246,8 @@ fn compiled_manifest(
     precision: Precision,
     tars: &[(String, Vec<u8>)],
 ) -> Result<String, BundleError> {
-    let path = bundle.path().join(MANIFEST_FILE);
-    let manifest_err = |message: String| BundleError::Manifest {
-        path: path.clone(),
-        message,
-    };
-    let text =
-        std::str::from_utf8(bundle.manifest_bytes()).map_err(|e| manifest_err(e.to_string()))?;
-    let mut table: toml::Table = toml::from_str(text).map_err(|e| manifest_err(e.to_string()))?;
+    let manifest_err = |message: String| manifest_error(bundle, message);
+    let (mut table, _) = manifest_table(bundle)?;
     let stages = table
         .get_mut("stage")
         .and_then(toml::Value::as_array_mut)
