@@ -13,11 +13,11 @@ use satmap_runtime::engine_tract::{Int8Arithmetic, LoadOptions, TractEngine};
 use satmap_sim::cli::compile::{calibrate, check_calibration};
 use satmap_sim::cli::export_dataset::SeedRange;
 use satmap_sim::eval::deviation::deviation;
-use satmap_sim::harness::{DEFAULT_MAX_DEGRADED_SHARE, ReplayConfig, ScenarioInput, replay_with};
-use satmap_sim::route_pack_builder::TileCompression;
+use satmap_sim::harness::{ReplayConfig, replay_with};
 
-/// The calibrated bundle: `satmap-sim compile --bundle models/bundles/test --precision int8
-/// --calibrate 1000..1004 --calibration-frames 8 --out models/bundles/test-w8a8.satmap`.
+/// The calibrated bundle: `satmap-sim compile --bundle models/bundles/test-int8.satmap
+/// --precision int8 --calibrate 1000..1004 --calibration-frames 8 --out
+/// models/bundles/test-w8a8.satmap`.
 fn w8a8_path() -> PathBuf {
     compiled_path(Precision::F32).with_file_name("test-w8a8.satmap")
 }

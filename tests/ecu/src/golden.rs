@@ -35,6 +35,13 @@ pub fn compiled_path(precision: Precision) -> PathBuf {
     })
 }
 
+/// The committed int8 `test` bundle with calibrated activation ranges (W8A8):
+/// `test-w8a8.satmap`, `test-int8.satmap`'s stages with an `[int8]` table.
+#[must_use]
+pub fn w8a8_path() -> PathBuf {
+    root().join("models/bundles/test-w8a8.satmap")
+}
+
 /// The rig the goldens were made with.
 ///
 /// # Panics

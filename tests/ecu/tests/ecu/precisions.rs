@@ -9,8 +9,10 @@
 //! e.g. the emulated Cortex-A76; its portable f16 kernels where the core has none, as on x86) rounds every
 //! activation and partial sum to f16 as well: its bounds are measured on both kernel families.
 
+use std::path::PathBuf;
+
 use satmap_ecu_tests::golden::{
-    compiled_engine_as, compiled_f16_engine, compiled_path, max_abs_diff,
+    compiled_engine_as, compiled_f16_engine, compiled_path, max_abs_diff, w8a8_path,
 };
 use satmap_ecu_tests::parity::stage_buffers;
 use satmap_runtime::Stage;
@@ -66,12 +68,29 @@ fn steps_within_bounds_of_f32(
     bounds: &[(&str, f32)],
     max_size_share: f64,
 ) {
-    let low = Bundle::open(compiled_path(precision)).unwrap();
+    steps_within_bounds_of_f32_at(
+        compiled_path(precision),
+        precision,
+        engine,
+        bounds,
+        max_size_share,
+    );
+}
+
+/// [`steps_within_bounds_of_f32`] for the bundle at `path`.
+fn steps_within_bounds_of_f32_at(
+    path: PathBuf,
+    precision: Precision,
+    engine: impl Fn() -> TractEngine,
+    bounds: &[(&str, f32)],
+    max_size_share: f64,
+) {
+    let low = Bundle::open(&path).unwrap();
     assert_eq!(low.manifest().precision, precision);
     let full = Bundle::open(compiled_path(Precision::F32)).unwrap();
     assert_eq!(full.manifest().precision, Precision::F32);
-    let size = |p: Precision| std::fs::metadata(compiled_path(p)).unwrap().len();
-    let (small, big) = (size(precision), size(Precision::F32));
+    let size = |p: &PathBuf| std::fs::metadata(p).unwrap().len();
+    let (small, big) = (size(&path), size(&compiled_path(Precision::F32)));
     println!("{precision} bundle {small} bytes, f32 {big} bytes");
     assert!(
         (small as f64) < big as f64 * max_size_share,
@@ -159,4 +178,40 @@ fn the_int8_bundle_steps_within_its_bounds_of_f32() {
         &INT8_BOUNDS,
         0.45,
     );
+}
+
+/// The int8 bundle with calibrated ranges, its 56 linear layers in integer arithmetic on this
+/// CPU's integer tier (AVX-512 VNNI, AVX-VNNI or AVX2 on x86; `sdot` on aarch64: every tier gives
+/// the same integer sums, the rest is the kernel family's f32): measured (2026-12-07) on the
+/// AVX-512 VNNI Xeon and on qemu's Cortex-A76, the larger doubled.
+const W8A8_BOUNDS: [(&str, f32); 8] = [
+    ("value", 0.071),         // measured 3.55e-2 (both)
+    ("bev_query", 0.99),      // 4.96e-1 (x86; aarch64 4.91e-1)
+    ("gkt_weights", 0.25),    // 1.26e-1 (x86; aarch64 1.22e-1)
+    ("gathered", 0.085),      // 4.25e-2 (aarch64; x86 4.02e-2)
+    ("camera_bev", 1.35),     // 6.76e-1 (x86; aarch64 6.72e-1)
+    ("satellite_bev", 0.344), // 1.72e-1 (x86; aarch64 1.42e-1)
+    ("class_logits", 1.2),    // 6.01e-1 (aarch64; x86 4.71e-1)
+    ("points", 0.222),        // 1.11e-1 (x86; aarch64 9.69e-2; normalised to the BEV range)
+];
+
+/// The W8A8 bundle, within [`W8A8_BOUNDS`], in under 45% of the f32 file; its linear layers are
+/// int8 products.
+#[test]
+fn the_w8a8_bundle_steps_within_its_bounds_of_f32() {
+    let engine = || {
+        let path = w8a8_path();
+        TractEngine::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    };
+    let loaded = engine();
+    let int8_layers: usize = Stage::ALL
+        .iter()
+        .map(|&s| loaded.rewrites(s).int8_linears)
+        .sum();
+    drop(loaded);
+    // 56 where the native f32 product runs (AVX-512: products over several axes are first
+    // reshaped into linear layers), 47 where tract's products run (aarch64).
+    println!("{int8_layers} int8 layers");
+    assert!(int8_layers >= 45, "{int8_layers} int8 layers");
+    steps_within_bounds_of_f32_at(w8a8_path(), Precision::Int8, engine, &W8A8_BOUNDS, 0.45);
 }
