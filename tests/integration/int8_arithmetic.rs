@@ -9,7 +9,8 @@ use std::path::PathBuf;
 use satmap_ecu_tests::golden::compiled_path;
 use satmap_runtime::bundle::{Bundle, Precision};
 use satmap_runtime::engine::Stage;
-use satmap_runtime::engine_tract::{Int8Arithmetic, LoadOptions, TractEngine};
+use satmap_runtime::engine_tract::{Int8Arithmetic, LoadOptions, RangeMethod, TractEngine};
+
 use satmap_sim::cli::compile::{calibrate, check_calibration};
 use satmap_sim::cli::export_dataset::SeedRange;
 use satmap_sim::eval::deviation::deviation;
@@ -50,6 +51,7 @@ fn the_w8a8_bundle_is_the_int8_bundle_with_ranges_that_calibration_gives_again()
         &compiled_path(Precision::Int8),
         SEEDS.parse().unwrap(),
         FRAMES,
+        RangeMethod::AbsMax,
     )
     .unwrap();
     assert_eq!(again, committed);

@@ -7,7 +7,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use satmap_runtime::bundle::{ActivationRange, Bundle, GraphFormat, Int8Calibration, Precision};
-use satmap_runtime::engine_tract::{LoadOptions, RangeLog, TractEngine};
+use satmap_runtime::engine_tract::{LoadOptions, RangeLog, RangeMethod, TractEngine};
+
 use satmap_runtime::translate::{compile, with_calibration};
 
 use crate::cli::export_dataset::{SeedRange, TRAIN_SEEDS};
@@ -42,6 +43,10 @@ pub struct Args {
     /// Frames of each calibration drive.
     #[arg(long, default_value_t = 8)]
     pub calibration_frames: usize,
+    /// How a layer's range is taken from the calibration's values: `abs-max` (the largest
+    /// magnitude) or `percentile-P` (the magnitude below which P% of them lie).
+    #[arg(long, default_value = "abs-max")]
+    pub calibration_method: RangeMethod,
 }
 
 /// The calibration frames a compile may use: `precision` int8, `seeds` inside the training
@@ -71,11 +76,16 @@ pub fn check_calibration(precision: Precision, seeds: SeedRange, frames: usize) 
 
 /// The activation ranges of the linear layers of `bundle` (a compiled int8 file) over
 /// `frames` frames of a synthetic drive of each world of `seeds`, the engine probing each
-/// layer's input: the largest magnitude seen (abs-max, symmetric; see docs/int8.md).
+/// layer's input, each range taken by `method` (symmetric; see docs/int8.md).
 ///
 /// # Errors
 /// A replay failing.
-pub fn calibrate(bundle: &Path, seeds: SeedRange, frames: usize) -> Result<Int8Calibration> {
+pub fn calibrate(
+    bundle: &Path,
+    seeds: SeedRange,
+    frames: usize,
+    method: RangeMethod,
+) -> Result<Int8Calibration> {
     let log = RangeLog::default();
     let options = LoadOptions {
         observe: Some(log.clone()),
@@ -87,7 +97,7 @@ pub fn calibrate(bundle: &Path, seeds: SeedRange, frames: usize) -> Result<Int8C
             .with_context(|| format!("calibration drive of world {seed}"))?;
     }
     let layers = log
-        .ranges()
+        .ranges(method)
         .into_iter()
         .map(|((stage, layer), abs_max)| ActivationRange {
             stage,
@@ -98,7 +108,7 @@ pub fn calibrate(bundle: &Path, seeds: SeedRange, frames: usize) -> Result<Int8C
         .filter(|r| r.abs_max.is_finite() && r.abs_max > 0.0)
         .collect();
     Ok(Int8Calibration {
-        method: "abs-max".into(),
+        method: method.to_string(),
         frames: format!(
             "synthetic drives of training-split worlds {}..{}, {frames} frames each at 2 Hz",
             seeds.start, seeds.end
@@ -122,7 +132,12 @@ pub fn run(args: &Args) -> Result<()> {
     if let (GraphFormat::Nnef, Some(seeds)) = (source.format(), args.calibrate) {
         // A compiled int8 bundle: its stages kept byte for byte, the ranges added.
         let t = Instant::now();
-        let calibration = calibrate(&args.bundle, seeds, args.calibration_frames)?;
+        let calibration = calibrate(
+            &args.bundle,
+            seeds,
+            args.calibration_frames,
+            args.calibration_method,
+        )?;
         let bytes = with_calibration(&source, &calibration)?;
         std::fs::write(&args.out, &bytes)
             .with_context(|| format!("writing {}", args.out.display()))?;
@@ -164,7 +179,12 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(seeds) = args.calibrate {
         let t = Instant::now();
-        let calibration = calibrate(&args.out, seeds, args.calibration_frames)?;
+        let calibration = calibrate(
+            &args.out,
+            seeds,
+            args.calibration_frames,
+            args.calibration_method,
+        )?;
         let bytes = with_calibration(&Bundle::open(&args.out)?, &calibration)?;
         std::fs::write(&args.out, &bytes)
             .with_context(|| format!("writing {}", args.out.display()))?;

@@ -62,6 +62,7 @@ pub use kernel_family::{KernelFamily, kernel_family};
 pub use ops::quant_linear::RangeLog;
 pub use passes::rewrite::Rewrites;
 use runner::{StageRunner, on_engine_threads, panic_message};
+pub use satmap_kernels::qgemm::histogram::RangeMethod;
 
 /// All five stages of a bundle, loaded into tract, implementing [`Engine`].
 pub struct TractEngine {

@@ -8,7 +8,7 @@
 //! `sum * (activation scale * column scale) + bias`. Every integer tier gives the same bits.
 //!
 //! [`RangeProbe`]: an identity op before each layer [`quantise_linears`] would take, which
-//! folds the largest `|x|` it sees into a [`RangeLog`] under the layer's name: what
+//! counts the magnitudes it sees into a [`RangeLog`] under the layer's name: what
 //! `satmap-sim compile --calibrate` records over frames of the training split.
 //!
 //! Both passes choose layers with the same rule (`layers`): every linear layer the native f32
@@ -18,6 +18,7 @@
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 
+use satmap_kernels::qgemm::histogram::{MagnitudeHistogram, RangeMethod};
 use satmap_kernels::qgemm::{self, IntTier, PackedQB, QFinish, padded_k, quantize};
 use tract_nnef::internal::*;
 
@@ -194,10 +195,10 @@ impl TypedOp for QuantLinear {
     as_op!();
 }
 
-/// The largest `|x|` seen per `(stage, layer name)`, shared by the probes of every stage of
-/// one load (and of every load given the same log).
+/// The magnitudes seen per `(stage, layer name)`, shared by the probes of every stage of one
+/// load (and of every load given the same log).
 #[derive(Clone, Debug, Default)]
-pub struct RangeLog(Arc<Mutex<BTreeMap<(String, String), f32>>>);
+pub struct RangeLog(Arc<Mutex<BTreeMap<(String, String), MagnitudeHistogram>>>);
 
 impl PartialEq for RangeLog {
     fn eq(&self, other: &Self) -> bool {
@@ -206,24 +207,25 @@ impl PartialEq for RangeLog {
 }
 
 impl RangeLog {
-    /// Fold `abs_max` into `key`'s range.
-    fn observe(&self, key: &(String, String), abs_max: f32) {
-        // A poisoned log (a probe panicked mid-update) still holds valid maxima.
+    /// Count `values` under `key`.
+    fn observe(&self, key: &(String, String), values: &[f32]) {
+        // A poisoned log (a probe panicked mid-update) still holds valid counts.
         let mut map = self
             .0
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let m = map.entry(key.clone()).or_insert(0.0);
-        *m = m.max(abs_max);
+        map.entry(key.clone()).or_default().add(values);
     }
 
-    /// The ranges so far, by `(stage, layer name)`.
+    /// The range `method` takes of each layer's values so far, by `(stage, layer name)`.
     #[must_use]
-    pub fn ranges(&self) -> BTreeMap<(String, String), f32> {
+    pub fn ranges(&self, method: RangeMethod) -> BTreeMap<(String, String), f32> {
         self.0
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .clone()
+            .iter()
+            .map(|(k, h)| (k.clone(), h.range(method)))
+            .collect()
     }
 }
 
@@ -255,8 +257,7 @@ impl EvalOp for RangeProbe {
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         ensure!(inputs.len() == 1, "RangeProbe takes one input");
         let x = inputs[0].try_as_plain_ram()?;
-        self.log
-            .observe(&self.key, quantize::abs_max(x.as_slice::<f32>()?));
+        self.log.observe(&self.key, x.as_slice::<f32>()?);
         Ok(inputs)
     }
 }
@@ -458,7 +459,7 @@ mod tests {
         assert_eq!(done, 1);
         let got = run_optimized(probed, &inputs);
         assert_eq!(bits(&got[0]), bits(&want[0]));
-        let ranges = log.ranges();
+        let ranges = log.ranges(RangeMethod::AbsMax);
         let name = layers(&model).unwrap()[0].1.clone();
         assert_eq!(
             ranges.get(&("stage".to_owned(), name)),

@@ -14,6 +14,7 @@
 //! AVX2 widens both to i16 and sums pairs (`vpmaddwd`, exact); aarch64 uses the signed dot
 //! product (`sdot`, Armv8.2 `dotprod`).
 
+pub mod histogram;
 pub mod pack;
 pub mod quantize;
 mod tier;
