@@ -117,6 +117,32 @@ pub fn calibrate(
     })
 }
 
+/// Calibrate the compiled int8 bundle at `from` over `seeds` as `args` say, and write it with its
+/// ranges to `to` (which may be `from`).
+///
+/// # Errors
+/// A replay failing, the bundle refusing the ranges, or `to` not writable.
+fn calibrate_into(from: &Path, to: &Path, seeds: SeedRange, args: &Args) -> Result<()> {
+    let t = Instant::now();
+    let calibration = calibrate(
+        from,
+        seeds,
+        args.calibration_frames,
+        args.calibration_method,
+    )?;
+    let bytes = with_calibration(&Bundle::open(from)?, &calibration)?;
+    std::fs::write(to, &bytes).with_context(|| format!("writing {}", to.display()))?;
+    println!(
+        "calibrated {} linear layers' activations ({}, {}) in {:.1} s ({} bytes)",
+        calibration.layers.len(),
+        calibration.method,
+        calibration.frames,
+        t.elapsed().as_secs_f64(),
+        bytes.len()
+    );
+    Ok(())
+}
+
 /// Compile, write, then load the written file back through the engine once and print the load
 /// time next to the folder's.
 ///
@@ -131,25 +157,11 @@ pub fn run(args: &Args) -> Result<()> {
     let source = Bundle::open(&args.bundle)?;
     if let (GraphFormat::Nnef, Some(seeds)) = (source.format(), args.calibrate) {
         // A compiled int8 bundle: its stages kept byte for byte, the ranges added.
-        let t = Instant::now();
-        let calibration = calibrate(
-            &args.bundle,
-            seeds,
-            args.calibration_frames,
-            args.calibration_method,
-        )?;
-        let bytes = with_calibration(&source, &calibration)?;
-        std::fs::write(&args.out, &bytes)
-            .with_context(|| format!("writing {}", args.out.display()))?;
+        print!("{}: stages kept; ", args.bundle.display());
+        calibrate_into(&args.bundle, &args.out, seeds, args)?;
         println!(
-            "{}: stages kept; calibrated {} linear layers' activations ({}, {}) in {:.1} s\nwrote {} ({} bytes), digest {}",
-            args.bundle.display(),
-            calibration.layers.len(),
-            calibration.method,
-            calibration.frames,
-            t.elapsed().as_secs_f64(),
+            "wrote {}, digest {}",
             args.out.display(),
-            bytes.len(),
             Bundle::open(&args.out)?.digest()
         );
         return Ok(());
@@ -178,29 +190,13 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
     if let Some(seeds) = args.calibrate {
-        let t = Instant::now();
-        let calibration = calibrate(
-            &args.out,
-            seeds,
-            args.calibration_frames,
-            args.calibration_method,
-        )?;
-        let bytes = with_calibration(&Bundle::open(&args.out)?, &calibration)?;
-        std::fs::write(&args.out, &bytes)
-            .with_context(|| format!("writing {}", args.out.display()))?;
-        println!(
-            "calibrated {} linear layers' activations ({}, {}) in {:.1} s",
-            calibration.layers.len(),
-            calibration.method,
-            calibration.frames,
-            t.elapsed().as_secs_f64()
-        );
+        calibrate_into(&args.out, &args.out, seeds, args)?;
     }
     let written = Bundle::open(&args.out)?;
     println!(
         "wrote {} ({} bytes), digest {}",
         args.out.display(),
-        compiled.bytes.len(),
+        std::fs::metadata(&args.out)?.len(),
         written.digest()
     );
     let t = Instant::now();
