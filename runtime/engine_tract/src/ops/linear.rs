@@ -167,6 +167,24 @@ impl Layer {
         let rows = self.input.iter().product::<usize>() / k.max(1);
         rows >= MIN_ROWS && self.n >= 2 && k > 0
     }
+
+    /// The constant bias the single `Add` after this layer's node `id` adds ([`bias_after`]),
+    /// with that `Add`: `[n]`, or any rank up to the output's with ones before `n`.
+    ///
+    /// # Errors
+    /// tract failing to give a fact.
+    pub(crate) fn bias_after(
+        &self,
+        model: &TypedModel,
+        id: usize,
+    ) -> TractResult<Option<(usize, Vec<f32>)>> {
+        let (rank, n) = (self.input.len(), self.n);
+        bias_after(model, id, |shape| {
+            shape.len() <= rank
+                && shape.last() == Some(&n)
+                && shape[..shape.len() - 1].iter().all(|&d| d == 1)
+        })
+    }
 }
 
 /// An f32 [`EinSum`] node of one activation (concrete shape) and one constant rank-2 matrix:
@@ -299,13 +317,7 @@ pub fn native_linears(mut model: TypedModel) -> TractResult<(TypedModel, usize)>
             continue;
         }
         let k = *layer.input.last().unwrap_or(&0);
-        // `[n]`, or any rank up to the output's with ones before `n`.
-        let (rank, n) = (layer.input.len(), layer.n);
-        let bias = bias_after(&model, id, |shape| {
-            shape.len() <= rank
-                && shape.last() == Some(&n)
-                && shape[..shape.len() - 1].iter().all(|&d| d == 1)
-        })?;
+        let bias = layer.bias_after(&model, id)?;
         let w_plain = layer.w.try_as_plain_ram()?;
         let op = PackedLinear {
             input: layer.input.clone(),

@@ -11,7 +11,7 @@
 //! counts the magnitudes it sees into a [`RangeLog`] under the layer's name: what
 //! `satmap-sim compile --calibrate` records over frames of the training split.
 //!
-//! Both passes choose layers with the same rule (`layers`): every linear layer the native f32
+//! Both passes choose layers with the same rule (`layer_at`): every linear layer the native f32
 //! product would take (`Layer::is_native`), keyed by its `EinSum` node's name in the
 //! decluttered graph, which is the same in every load of the same stage.
 
@@ -24,7 +24,7 @@ use tract_nnef::internal::*;
 
 use crate::graph::matching::replace_with_op;
 use crate::ops::finish::Epilogue;
-use crate::ops::linear::{Layer, as_layer, bias_after};
+use crate::ops::linear::{Layer, as_layer};
 use crate::pool;
 
 /// Rows of the activation quantised and multiplied as one task (a thread's share).
@@ -271,25 +271,12 @@ impl TypedOp for RangeProbe {
     as_op!();
 }
 
-/// The layers the int8 passes take, in evaluation order: `(node id, name)`. A pass reads each
-/// one's [`Layer`] again when it reaches it ([`layer_at`]): a patch before it may have rewired
-/// its input.
-fn layers(model: &TypedModel) -> TractResult<Vec<(usize, String)>> {
-    let mut out = Vec::new();
-    for id in model.eval_order()? {
-        if layer_at(model, id)?.is_some() {
-            out.push((id, model.node(id).name.clone()));
-        }
-    }
-    Ok(out)
-}
-
 /// Node `id` as a layer the int8 passes take.
 fn layer_at(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     Ok(as_layer(model, id)?.filter(Layer::is_native))
 }
 
-/// Replace every layer `layers` finds that has a range in `ranges` by a [`QuantLinear`] on
+/// Replace every layer `layer_at` takes that has a range in `ranges` by a [`QuantLinear`] on
 /// `tier`, its bias `Add` taken in; returns the model and the number replaced.
 ///
 /// # Errors
@@ -300,20 +287,18 @@ pub fn quantise_linears(
     tier: IntTier,
 ) -> TractResult<(TypedModel, usize)> {
     let mut done = 0;
-    // Ids stay valid while patching: a patch appends nodes and leaves the old ones dead.
-    for (id, name) in layers(&model)? {
+    // Ids stay valid while patching (a patch appends nodes and leaves the old ones dead), and
+    // each layer is read when it is reached: a patch before it may have rewired its input.
+    for id in model.eval_order()? {
+        let name = model.node(id).name.clone();
         let Some(&abs_max) = ranges.get(&name) else {
             continue;
         };
         let Some(layer) = layer_at(&model, id)? else {
             continue;
         };
-        let (rank, n) = (layer.input.len(), layer.n);
-        let bias = bias_after(&model, id, |shape| {
-            shape.len() <= rank
-                && shape.last() == Some(&n)
-                && shape[..shape.len() - 1].iter().all(|&d| d == 1)
-        })?;
+        let n = layer.n;
+        let bias = layer.bias_after(&model, id)?;
         let w = layer.w.try_as_plain_ram()?;
         let op = QuantLinear::new(
             layer.input.clone(),
@@ -330,7 +315,7 @@ pub fn quantise_linears(
     Ok((model, done))
 }
 
-/// Put a [`RangeProbe`] into `log` before every layer `layers` finds in `stage`; returns the model and
+/// Put a [`RangeProbe`] into `log` before every layer `layer_at` takes in `stage`; returns the model and
 /// the number of probes.
 ///
 /// # Errors
@@ -341,11 +326,13 @@ pub fn probe_linears(
     stage: &str,
 ) -> TractResult<(TypedModel, usize)> {
     let mut done = 0;
-    for (id, name) in layers(&model)? {
+    // As in `quantise_linears`: old ids stay valid, each layer read when reached.
+    for id in model.eval_order()? {
         let Some(layer) = layer_at(&model, id)? else {
             continue;
         };
         let node = model.node(id).clone();
+        let name = node.name.clone();
         let mut patch = TypedModelPatch::default();
         let mut taps: TVec<OutletId> = node
             .inputs
@@ -386,6 +373,18 @@ mod tests {
         tvec![Tensor::from_shape(shape, &x).unwrap().into_tvalue()]
     }
 
+    /// The name of the one layer of `model` the int8 passes take.
+    fn layer_name(model: &TypedModel) -> String {
+        let ids: Vec<usize> = model
+            .eval_order()
+            .unwrap()
+            .into_iter()
+            .filter(|&id| layer_at(model, id).unwrap().is_some())
+            .collect();
+        assert_eq!(ids.len(), 1);
+        model.node(ids[0]).name.clone()
+    }
+
     fn values(t: &TValue) -> Vec<f32> {
         t.try_as_plain_ram()
             .unwrap()
@@ -408,7 +407,7 @@ mod tests {
             let want = values(&run_optimized(model.clone(), &inputs)[0]);
             // The input's range, as a calibration over this input would record it.
             let abs_max = quantize::abs_max(&values(&inputs[0]));
-            let name = layers(&model).unwrap()[0].1.clone();
+            let name = layer_name(&model);
             let ranges = BTreeMap::from([(name, abs_max)]);
             let mut first: Option<Vec<u32>> = None;
             for tier in IntTier::ALL.into_iter().filter(|t| t.runs_here()) {
@@ -460,7 +459,7 @@ mod tests {
         let got = run_optimized(probed, &inputs);
         assert_eq!(bits(&got[0]), bits(&want[0]));
         let ranges = log.ranges(RangeMethod::AbsMax);
-        let name = layers(&model).unwrap()[0].1.clone();
+        let name = layer_name(&model);
         assert_eq!(
             ranges.get(&("stage".to_owned(), name)),
             Some(&quantize::abs_max(&values(&inputs[0])))

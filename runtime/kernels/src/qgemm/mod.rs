@@ -106,9 +106,7 @@ pub fn product(
         return Ok(());
     }
     check("c", c.len(), (rows - 1) * ldc + n)?;
-    if ldc < n {
-        check("ldc", ldc, n)?;
-    }
+    check("ldc", ldc, n)?;
     if let Some((res, ld)) = finish.residual {
         check("residual", res.len(), (rows - 1) * ld + n)?;
         check("residual ld", ld, n)?;
