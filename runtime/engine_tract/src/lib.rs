@@ -59,7 +59,7 @@ pub use graph::load::{HalfArithmetic, parse_stage_graph};
 pub use graph::load::{check_graph_io, engine_error, nnef_model, onnx_model};
 pub(crate) use graph::load::{confined, datum};
 pub use kernel_family::{KernelFamily, kernel_family};
-pub use ops::quant_linear::RangeLog;
+pub use ops::range_probe::RangeLog;
 pub use passes::rewrite::Rewrites;
 use runner::{StageRunner, on_engine_threads, panic_message};
 pub use satmap_kernels::qgemm::histogram::RangeMethod;

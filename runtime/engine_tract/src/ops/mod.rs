@@ -17,5 +17,6 @@ pub mod linear;
 pub mod max_pool;
 pub mod pointwise;
 pub mod quant_linear;
+pub mod range_probe;
 pub mod softmax;
 pub mod weighted_sum;

@@ -7,24 +7,23 @@
 //! summed in i32 on the integer tier this CPU has ([`IntTier`]) and finished in the same store:
 //! `sum * (activation scale * column scale) + bias`. Every integer tier gives the same bits.
 //!
-//! [`RangeProbe`]: an identity op before each layer [`quantise_linears`] would take, which
-//! counts the magnitudes it sees into a [`RangeLog`] under the layer's name: what
-//! `satmap-sim compile --calibrate` records over frames of the training split.
+//! [`probe_linears`]: a [`crate::ops::range_probe::RangeProbe`] before each layer
+//! [`quantise_linears`] would take: what `satmap-sim compile --calibrate` records over frames
+//! of the training split.
 //!
 //! Both passes choose layers with the same rule (`layer_at`): every linear layer the native f32
 //! product would take (`Layer::is_native`), keyed by its `EinSum` node's name in the
 //! decluttered graph, which is the same in every load of the same stage.
 
 use std::collections::BTreeMap;
-use std::sync::Mutex;
 
-use satmap_kernels::qgemm::histogram::{MagnitudeHistogram, RangeMethod};
 use satmap_kernels::qgemm::{self, IntTier, PackedQB, QFinish, padded_k, quantize};
 use tract_nnef::internal::*;
 
 use crate::graph::matching::replace_with_op;
 use crate::ops::finish::Epilogue;
 use crate::ops::linear::{Layer, as_layer};
+use crate::ops::range_probe::{RangeLog, probe_inputs};
 use crate::pool;
 
 /// Rows of the activation quantised and multiplied as one task (a thread's share).
@@ -195,82 +194,6 @@ impl TypedOp for QuantLinear {
     as_op!();
 }
 
-/// The magnitudes seen per `(stage, layer name)`, shared by the probes of every stage of one
-/// load (and of every load given the same log).
-#[derive(Clone, Debug, Default)]
-pub struct RangeLog(Arc<Mutex<BTreeMap<(String, String), MagnitudeHistogram>>>);
-
-impl PartialEq for RangeLog {
-    fn eq(&self, other: &Self) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
-    }
-}
-
-impl RangeLog {
-    /// Count `values` under `key`.
-    fn observe(&self, key: &(String, String), values: &[f32]) {
-        // A poisoned log (a probe panicked mid-update) still holds valid counts.
-        let mut map = self
-            .0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        map.entry(key.clone()).or_default().add(values);
-    }
-
-    /// The range `method` takes of each layer's values so far, by `(stage, layer name)`.
-    #[must_use]
-    pub fn ranges(&self, method: RangeMethod) -> BTreeMap<(String, String), f32> {
-        self.0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .iter()
-            .map(|(k, h)| (k.clone(), h.range(method)))
-            .collect()
-    }
-}
-
-/// An identity op that records its input's largest magnitude under `key`.
-#[derive(Clone, Debug)]
-pub struct RangeProbe {
-    /// The stage's and the layer's name.
-    pub key: (String, String),
-    log: RangeLog,
-}
-
-impl PartialEq for RangeProbe {
-    fn eq(&self, other: &Self) -> bool {
-        self.key == other.key && Arc::ptr_eq(&self.log.0, &other.log.0)
-    }
-}
-impl Eq for RangeProbe {}
-
-impl Op for RangeProbe {
-    fn name(&self) -> StaticName {
-        "RangeProbe".into()
-    }
-    op_as_typed_op!();
-}
-
-impl EvalOp for RangeProbe {
-    op_out_of_plan!();
-
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        ensure!(inputs.len() == 1, "RangeProbe takes one input");
-        let x = inputs[0].try_as_plain_ram()?;
-        self.log.observe(&self.key, x.as_slice::<f32>()?);
-        Ok(inputs)
-    }
-}
-
-impl TypedOp for RangeProbe {
-    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        ensure!(inputs.len() == 1);
-        Ok(tvec!(inputs[0].without_value()))
-    }
-
-    as_op!();
-}
-
 /// Node `id` as a layer the int8 passes take.
 fn layer_at(model: &TypedModel, id: usize) -> TractResult<Option<Layer>> {
     Ok(as_layer(model, id)?.filter(Layer::is_native))
@@ -315,46 +238,19 @@ pub fn quantise_linears(
     Ok((model, done))
 }
 
-/// Put a [`RangeProbe`] into `log` before every layer `layer_at` takes in `stage`; returns the model and
-/// the number of probes.
+/// Put a [`RangeProbe`] into `log` before every layer `layer_at` takes in `stage`; returns the
+/// model and the number of probes.
 ///
 /// # Errors
 /// tract refusing a patch.
 pub fn probe_linears(
-    mut model: TypedModel,
+    model: TypedModel,
     log: &RangeLog,
     stage: &str,
 ) -> TractResult<(TypedModel, usize)> {
-    let mut done = 0;
-    // As in `quantise_linears`: old ids stay valid, each layer read when reached.
-    for id in model.eval_order()? {
-        let Some(layer) = layer_at(&model, id)? else {
-            continue;
-        };
-        let node = model.node(id).clone();
-        let name = node.name.clone();
-        let mut patch = TypedModelPatch::default();
-        let mut taps: TVec<OutletId> = node
-            .inputs
-            .iter()
-            .map(|&o| patch.tap_model(&model, o))
-            .collect::<TractResult<_>>()?;
-        let xi = node
-            .inputs
-            .iter()
-            .position(|&o| o == layer.x)
-            .context("the layer's activation is one of its inputs")?;
-        let probe = RangeProbe {
-            key: (stage.to_owned(), name.clone()),
-            log: log.clone(),
-        };
-        taps[xi] = patch.wire_node(format!("{name}.range_probe"), probe, &[taps[xi]])?[0];
-        let y = patch.wire_node(format!("{name}.probed"), node.op.clone(), &taps)?[0];
-        patch.shunt_outside(&model, OutletId::new(id, 0), y)?;
-        patch.apply(&mut model)?;
-        done += 1;
-    }
-    Ok((model, done))
+    probe_inputs(model, log, stage, |model, id| {
+        Ok(layer_at(model, id)?.map(|layer| layer.x))
+    })
 }
 
 #[cfg(test)]
@@ -364,6 +260,7 @@ mod tests {
     //! they record is the input's largest magnitude, and the probed model computes the same bits.
     use super::*;
     use crate::test_support::{bits, linear_model, run_optimized};
+    use satmap_kernels::qgemm::histogram::RangeMethod;
 
     fn input(shape: &[usize]) -> TVec<TValue> {
         let len: usize = shape.iter().product();

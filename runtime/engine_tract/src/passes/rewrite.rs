@@ -26,7 +26,7 @@ use super::{contraction, conv_direct, epilogue, fold, natural_consts};
 use crate::gemm;
 use crate::ops::{
     attention, batched, bilinear, broadcast, conv_unfold, gelu, layer_norm, linear, max_pool,
-    pointwise, quant_linear, softmax, weighted_sum,
+    pointwise, quant_linear, range_probe, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage (`optimise`); serialised
@@ -120,7 +120,7 @@ pub enum Quantisation {
     /// Every layer gets a range probe into this log (a calibration run).
     Observe {
         /// Where the ranges go.
-        log: quant_linear::RangeLog,
+        log: range_probe::RangeLog,
         /// The stage's name (the first half of each range's key).
         stage: &'static str,
     },
