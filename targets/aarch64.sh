@@ -28,10 +28,12 @@ if [[ "$neon" -ne 3 ]]; then
   echo "aarch64: the NEON tier's 3 tests did not all run and pass ($neon)" >&2
   exit 1
 fi
-# And the integer product's dot-product tier (sdot) against the portable reference.
+# And the integer products' dot-product tier (sdot) against the portable reference: the linear
+# product's 4 tests (qgemm_tiers) and the channel-first (convolution) product's 3
+# (qgemm_channel_tiers).
 sdot=$(grep -c '^test aarch64_dotprod::.* ok$' out/aarch64-tests.log || true)
-if [[ "$sdot" -ne 4 ]]; then
-  echo "aarch64: the dotprod integer tier's 4 tests did not all run and pass ($sdot)" >&2
+if [[ "$sdot" -ne 7 ]]; then
+  echo "aarch64: the dotprod integer tier's 7 tests did not all run and pass ($sdot)" >&2
   exit 1
 fi
 passed=$(awk '/^test result:/ { for (i = 1; i <= NF; i++) if ($i == "passed;") n += $(i - 1) } END { print n + 0 }' out/aarch64-tests.log)

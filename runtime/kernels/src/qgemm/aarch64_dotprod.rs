@@ -7,6 +7,7 @@
 use core::arch::aarch64::*;
 use core::arch::asm;
 
+use super::channels::{ChannelJob, drive_channels};
 use super::pack::Line;
 use super::{IntSums, Job, QNR, drive};
 
@@ -39,6 +40,19 @@ pub(super) unsafe fn product(job: &Job<'_>, c: &mut [f32]) {
     let kp = job.kp;
     drive(job, c, false, |a, rows, lines, sums| {
         // SAFETY: the caller's contract; `drive` passes `rows` rows of `kp` bytes.
+        unsafe { tile(a, kp, rows, lines, sums) }
+    });
+}
+
+/// The channel-first product with the dot-product instructions (signed by signed: no offset).
+///
+/// # Safety
+/// The CPU has the dot-product instructions; `job`'s slices cover its sizes.
+#[target_feature(enable = "neon,dotprod")]
+pub(super) unsafe fn channels(job: &ChannelJob<'_>, c: &mut [f32]) {
+    let kp = job.kp;
+    drive_channels(job, c, false, |a, rows, lines, sums| {
+        // SAFETY: the caller's contract; the driver passes `rows` rows of `kp` bytes.
         unsafe { tile(a, kp, rows, lines, sums) }
     });
 }

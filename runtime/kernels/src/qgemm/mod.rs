@@ -13,7 +13,11 @@
 //! subtract `128 * sum_k w[k][c]` (stored with the packed weights, [`PackedQB::col_sums`]);
 //! AVX2 widens both to i16 and sums pairs (`vpmaddwd`, exact); aarch64 uses the signed dot
 //! product (`sdot`, Armv8.2 `dotprod`).
+//!
+//! [`channel_product`] is the same product with the roles swapped for convolutions (weights
+//! broadcast, patches packed, the output channel-first): see [`channels`].
 
+pub mod channels;
 pub mod histogram;
 pub mod pack;
 pub mod quantize;
@@ -27,7 +31,8 @@ mod x86_64_avx2;
 #[cfg(target_arch = "x86_64")]
 mod x86_64_vnni;
 
-pub use pack::{PackError, PackedQB, padded_k};
+pub use channels::{QRows, RowFinish, channel_product, interleave_group};
+pub use pack::{Line, PackError, PackedQB, padded_k};
 pub use tier::{INT_TIER_ENV, IntTier, IntTierError};
 
 use crate::gemm::floor;

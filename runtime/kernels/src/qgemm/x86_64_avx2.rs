@@ -6,6 +6,7 @@
 
 use core::arch::x86_64::*;
 
+use super::channels::{ChannelJob, drive_channels};
 use super::pack::Line;
 use super::{IntSums, Job, QNR, drive};
 
@@ -21,6 +22,19 @@ pub(super) unsafe fn product(job: &Job<'_>, c: &mut [f32]) {
     let kp = job.kp;
     drive(job, c, false, |a, rows, lines, sums| {
         // SAFETY: the caller's contract; `drive` passes `rows` rows of `kp` bytes.
+        unsafe { tile(a, kp, rows, lines, sums) }
+    });
+}
+
+/// The channel-first product on AVX2 (signed by signed: no offset).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; `job`'s slices cover its sizes.
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn channels(job: &ChannelJob<'_>, c: &mut [f32]) {
+    let kp = job.kp;
+    drive_channels(job, c, false, |a, rows, lines, sums| {
+        // SAFETY: the caller's contract; the driver passes `rows` rows of `kp` bytes.
         unsafe { tile(a, kp, rows, lines, sums) }
     });
 }

@@ -10,6 +10,7 @@
 
 use core::arch::x86_64::*;
 
+use super::channels::{ChannelJob, drive_channels, finish_tile};
 use super::pack::Line;
 use super::{IntSums, Job, QMR, QNR, drive};
 
@@ -134,17 +135,118 @@ pub(super) unsafe fn product_256(job: &Job<'_>, c: &mut [f32]) {
     let kp = job.kp;
     drive(job, c, true, |a, rows, lines, sums| {
         // SAFETY: the caller's contract; `drive` passes `rows` rows of `kp` bytes.
-        unsafe { tile_256(a, kp, rows, lines, sums) }
+        unsafe { tile_256::<false>(a, kp, rows, lines, sums) }
     });
 }
 
-/// The sums of `rows` rows of `a` against one panel's `lines`, on AVX-VNNI.
+/// The channel-first product on AVX-VNNI: the patches' sign bits flipped as each line is
+/// loaded, `128 * row sum` taken away by the finish ([`super::channels`]).
+///
+/// # Safety
+/// The CPU has AVX2 and AVX-VNNI; `job`'s slices cover its sizes.
+#[target_feature(enable = "avx2,fma,avxvnni")]
+pub(super) unsafe fn channels_256(job: &ChannelJob<'_>, c: &mut [f32]) {
+    let kp = job.kp;
+    drive_channels(job, c, true, |a, rows, lines, sums| {
+        // SAFETY: the caller's contract; the driver passes `rows` rows of `kp` bytes.
+        unsafe { tile_256::<true>(a, kp, rows, lines, sums) }
+    });
+}
+
+/// The channel-first product on AVX-512 VNNI: tiles of [`QMR`] weight rows and two patch
+/// panels (the last odd panel alone), the patches' sign bits flipped as each line is loaded,
+/// the sums finished by the shared finish ([`super::channels`]).
+///
+/// # Safety
+/// The CPU has AVX-512F/BW and AVX-512 VNNI; `job`'s slices cover its sizes.
+#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+pub(super) unsafe fn channels_512(job: &ChannelJob<'_>, c: &mut [f32]) {
+    let (kp, m) = (job.kp, job.w.m());
+    let groups = kp / 4;
+    let panels = job.cols.div_ceil(QNR);
+    let panel = |p: usize| &job.lines[p * groups..][..groups];
+    let mut sums: [IntSums; 2] = [[[0; QNR]; QMR]; 2];
+    let mut p = 0;
+    while p < panels {
+        let pair = p + 2 <= panels;
+        for r0 in (0..m).step_by(QMR) {
+            let rows = (m - r0).min(QMR);
+            let a = job.w.rows_from(r0);
+            if pair {
+                // SAFETY: the caller's contract; rows `r0..r0 + rows` and panels `p, p + 1`.
+                unsafe { flipped_sums_512::<2>(a, kp, rows, [panel(p), panel(p + 1)], &mut sums) };
+            } else {
+                // SAFETY: as above, panel `p`.
+                unsafe { flipped_sums_512::<1>(a, kp, rows, [panel(p)], &mut sums) };
+            }
+            for (h, s) in sums.iter_mut().enumerate().take(if pair { 2 } else { 1 }) {
+                finish_tile(job, s, (r0, rows), p + h, true, c);
+            }
+        }
+        p += if pair { 2 } else { 1 };
+    }
+}
+
+/// The sums of `rows` weight rows of `a` against `P` patch panels, the lines' sign bits
+/// flipped (unsigned patches + 128 by signed weights), into `sums[..P]`.
+///
+/// # Safety
+/// As [`channels_512`]; `1 <= rows <= QMR`, `a` holds `rows` rows of `kp` bytes, each panel
+/// `kp / 4` lines.
+#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+#[inline]
+unsafe fn flipped_sums_512<const P: usize>(
+    a: &[i8],
+    kp: usize,
+    rows: usize,
+    lines: [&[Line]; P],
+    sums: &mut [IntSums; 2],
+) {
+    const _: () = assert!(QNR == 16);
+    let starts = row_starts(a, kp, rows);
+    let flip = _mm512_set1_epi32(FLIP);
+    let mut acc = [[_mm512_setzero_si512(); P]; QMR];
+    #[allow(clippy::needless_range_loop)]
+    for g in 0..kp / 4 {
+        // SAFETY: each panel has `kp / 4` lines of 64 bytes on a 64-byte boundary.
+        let b: [__m512i; P] = core::array::from_fn(|h| {
+            _mm512_xor_si512(
+                unsafe { _mm512_load_si512(lines[h][g].0.as_ptr().cast()) },
+                flip,
+            )
+        });
+        for (acc, &row) in acc.iter_mut().zip(&starts) {
+            // SAFETY: `4 * g + 4 <= kp`: four bytes of the row.
+            let v = unsafe { row.add(4 * g).cast::<i32>().read_unaligned() };
+            let x = _mm512_set1_epi32(v);
+            for (acc, &b) in acc.iter_mut().zip(&b) {
+                *acc = _mm512_dpbusd_epi32(*acc, b, x);
+            }
+        }
+    }
+    for (r, acc) in acc.iter().enumerate().take(rows) {
+        for (h, &v) in acc.iter().enumerate() {
+            // SAFETY: a row of sums is 16 i32.
+            unsafe { _mm512_storeu_si512(sums[h][r].as_mut_ptr().cast(), v) };
+        }
+    }
+}
+
+/// The sums of `rows` rows of `a` against one panel's `lines`, on AVX-VNNI: the rows' bytes
+/// are the flipped (unsigned) operand, or with `FLIP_LINES` the lines' (the channel-first
+/// product's patches).
 ///
 /// # Safety
 /// As [`product_256`]; otherwise as [`tile_512`].
 #[target_feature(enable = "avx2,avxvnni")]
 #[inline]
-unsafe fn tile_256(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut IntSums) {
+unsafe fn tile_256<const FLIP_LINES: bool>(
+    a: &[i8],
+    kp: usize,
+    rows: usize,
+    lines: &[Line],
+    sums: &mut IntSums,
+) {
     let starts = row_starts(a, kp, rows);
     let flip = _mm256_set1_epi32(FLIP);
     for r0 in (0..rows).step_by(PASS_ROWS) {
@@ -152,13 +254,23 @@ unsafe fn tile_256(a: &[i8], kp: usize, rows: usize, lines: &[Line], sums: &mut 
         for (g, line) in lines.iter().enumerate() {
             let p = line.0.as_ptr().cast::<__m256i>();
             // SAFETY: a line is 64 bytes on a 64-byte boundary: two aligned 32-byte halves.
-            let (b0, b1) = unsafe { (_mm256_load_si256(p), _mm256_load_si256(p.add(1))) };
+            let (mut b0, mut b1) = unsafe { (_mm256_load_si256(p), _mm256_load_si256(p.add(1))) };
+            if FLIP_LINES {
+                b0 = _mm256_xor_si256(b0, flip);
+                b1 = _mm256_xor_si256(b1, flip);
+            }
             for (r, acc) in acc.iter_mut().enumerate() {
                 // SAFETY: `4 * g + 4 <= kp`: four bytes of a row (`r0 + r < QMR`).
                 let v = unsafe { starts[r0 + r].add(4 * g).cast::<i32>().read_unaligned() };
-                let x = _mm256_xor_si256(_mm256_set1_epi32(v), flip);
-                acc[0] = _mm256_dpbusd_avx_epi32(acc[0], x, b0);
-                acc[1] = _mm256_dpbusd_avx_epi32(acc[1], x, b1);
+                if FLIP_LINES {
+                    let x = _mm256_set1_epi32(v);
+                    acc[0] = _mm256_dpbusd_avx_epi32(acc[0], b0, x);
+                    acc[1] = _mm256_dpbusd_avx_epi32(acc[1], b1, x);
+                } else {
+                    let x = _mm256_xor_si256(_mm256_set1_epi32(v), flip);
+                    acc[0] = _mm256_dpbusd_avx_epi32(acc[0], x, b0);
+                    acc[1] = _mm256_dpbusd_avx_epi32(acc[1], x, b1);
+                }
             }
         }
         for (r, acc) in acc.iter().enumerate().take(rows - r0) {
