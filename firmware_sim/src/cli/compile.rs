@@ -133,7 +133,7 @@ fn calibrate_into(from: &Path, to: &Path, seeds: SeedRange, args: &Args) -> Resu
     let bytes = with_calibration(&Bundle::open(from)?, &calibration)?;
     std::fs::write(to, &bytes).with_context(|| format!("writing {}", to.display()))?;
     println!(
-        "calibrated {} linear layers' activations ({}, {}) in {:.1} s ({} bytes)",
+        "calibrated {} layers' activations ({}, {}) in {:.1} s ({} bytes)",
         calibration.layers.len(),
         calibration.method,
         calibration.frames,

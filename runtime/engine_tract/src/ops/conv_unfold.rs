@@ -87,9 +87,17 @@ impl Unfold {
     }
 
     /// Patch row `r` (input channel, kernel row, kernel column) of the input planes `xs` for
-    /// the output pixels `p0..p0 + out.len()` into `out`, each value written once: zeros in the
-    /// padding and past the last pixel.
-    fn patch_row(&self, xs: &[f32], r: usize, p0: usize, out: &mut [f32]) {
+    /// the output pixels `p0..p0 + out.len()` into `out`, each value written once: zeros
+    /// (`T::default()`) in the padding and past the last pixel. f32 for [`UnfoldConv`], the
+    /// quantised bytes for [`crate::ops::quant_conv::QuantConv`].
+    pub(crate) fn patch_row<T: Copy + Default>(
+        &self,
+        xs: &[T],
+        r: usize,
+        p0: usize,
+        out: &mut [T],
+    ) {
+        let zero = T::default();
         let [_, h, w] = self.input;
         let [kh, kw] = self.kernel;
         let [oh, ow] = self.output;
@@ -115,7 +123,7 @@ impl Unfold {
         while p < end {
             let d = &mut out[p - p0..];
             if p >= oh * ow {
-                d.fill(0.0);
+                d.fill(zero);
                 break;
             }
             let (oy, ox0) = (p / ow, p % ow);
@@ -123,14 +131,14 @@ impl Unfold {
             let d = &mut d[..ox1 - ox0];
             let iy = (oy * sy + ky * dy) as isize - pt as isize;
             if iy < 0 || iy >= h as isize {
-                d.fill(0.0);
+                d.fill(zero);
             } else {
                 let a = lo.clamp(ox0, ox1);
                 let b = hi.clamp(a, ox1);
                 let (head, rest) = d.split_at_mut(a - ox0);
                 let (body, tail) = rest.split_at_mut(b - a);
-                head.fill(0.0);
-                tail.fill(0.0);
+                head.fill(zero);
+                tail.fill(zero);
                 if a < b {
                     let first = iy as usize * w + (a as isize * sx as isize + off) as usize;
                     if sx == 1 {
@@ -326,67 +334,108 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
     let mut done = 0;
     for name in names {
         let id = model.node_id_by_name(&name)?;
-        let node = model.node(id);
-        let Some(conv) = node.op_as::<Conv>() else {
+        let Some(conv) = conv_layer_at(&model, id)? else {
             continue;
         };
-        if conv.q_params.is_some()
-            || conv.group != 1
-            || !matches!(
-                conv.pool_spec.data_format,
-                DataFormat::NCHW | DataFormat::CHW
-            )
-            || conv.pool_spec.kernel_shape.len() != 2
-            || conv.output_channels() < MIN_OUTPUT_CHANNELS
-        {
+        if conv.out_channels() < MIN_OUTPUT_CHANNELS {
             continue;
         }
-        let facts: Vec<TypedFact> = model.node_input_facts(id)?.into_iter().cloned().collect();
-        if facts.len() != 3 || facts[0].datum_type != f32::datum_type() {
-            continue;
-        }
-        let Some(xs) = facts[0].shape.as_concrete() else {
-            continue;
-        };
-        let (Some(kernel), Some(bias)) = (facts[1].konst.clone(), facts[2].konst.clone()) else {
-            continue;
-        };
-        let batch_axis = conv.pool_spec.data_format == DataFormat::NCHW;
-        let (ci, h, w) = match *xs {
-            [1, c, h, w] if batch_axis => (c, h, w),
-            [c, h, w] if !batch_axis => (c, h, w),
-            _ => continue,
-        };
-        let co = conv.output_channels();
-        let ks = &conv.pool_spec.kernel_shape;
-        let (kh, kw) = (ks[0], ks[1]);
-        if kernel.shape() != [co, ci, kh, kw] {
-            continue;
-        }
-        let Some(unfold) = Unfold::of_pool(&conv.pool_spec, [ci, h, w]) else {
-            continue;
-        };
-        let bias_plain = bias.try_as_plain_ram()?;
-        let bias_all = bias_plain.as_slice::<f32>()?;
-        let bias_vals: Vec<f32> = if bias.rank() == 0 {
-            vec![bias_all[0]; co]
-        } else if bias.shape() == [co] {
-            bias_all.to_vec()
-        } else {
-            continue;
-        };
-        let kernel_plain = kernel.try_as_plain_ram()?;
+        let kernel_plain = conv.kernel.try_as_plain_ram()?;
         let op = UnfoldConv::new(
-            unfold,
-            batch_axis,
+            conv.unfold.clone(),
+            conv.batch_axis,
             kernel_plain.as_slice::<f32>()?,
-            bias_vals,
+            conv.bias.clone(),
         );
-        let x = node.inputs[0];
-        replace_with_op(&mut model, &[x], id, format!("{name}.unfold_conv"), op)?;
+        replace_with_op(&mut model, &[conv.x], id, format!("{name}.unfold_conv"), op)?;
         done += 1;
     }
     Ok((model, done))
+}
+
+/// A convolution the native passes take, read off its node: one group, NCHW over two spatial
+/// axes (or CHW), batch 1, f32, constant weights and bias.
+#[derive(Clone, Debug)]
+pub(crate) struct ConvLayer {
+    /// Its patches.
+    pub unfold: Unfold,
+    /// Whether input and output carry a batch axis of 1.
+    pub batch_axis: bool,
+    /// The input map.
+    pub x: OutletId,
+    /// The weights, OIHW.
+    pub kernel: Arc<Tensor>,
+    /// One bias an output channel.
+    pub bias: Vec<f32>,
+}
+
+impl ConvLayer {
+    /// Output channels.
+    pub fn out_channels(&self) -> usize {
+        self.bias.len()
+    }
+}
+
+/// Node `id` as a [`ConvLayer`], or `None` when it is not one.
+///
+/// # Errors
+/// tract refusing a fact (an inconsistent model).
+pub(crate) fn conv_layer_at(model: &TypedModel, id: usize) -> TractResult<Option<ConvLayer>> {
+    let node = model.node(id);
+    let Some(conv) = node.op_as::<Conv>() else {
+        return Ok(None);
+    };
+    if conv.q_params.is_some()
+        || conv.group != 1
+        || !matches!(
+            conv.pool_spec.data_format,
+            DataFormat::NCHW | DataFormat::CHW
+        )
+        || conv.pool_spec.kernel_shape.len() != 2
+    {
+        return Ok(None);
+    }
+    let facts: Vec<TypedFact> = model.node_input_facts(id)?.into_iter().cloned().collect();
+    if facts.len() != 3 || facts[0].datum_type != f32::datum_type() {
+        return Ok(None);
+    }
+    let Some(xs) = facts[0].shape.as_concrete() else {
+        return Ok(None);
+    };
+    let (Some(kernel), Some(bias)) = (facts[1].konst.clone(), facts[2].konst.clone()) else {
+        return Ok(None);
+    };
+    let batch_axis = conv.pool_spec.data_format == DataFormat::NCHW;
+    let (ci, h, w) = match *xs {
+        [1, c, h, w] if batch_axis => (c, h, w),
+        [c, h, w] if !batch_axis => (c, h, w),
+        _ => return Ok(None),
+    };
+    let co = conv.output_channels();
+    let ks = &conv.pool_spec.kernel_shape;
+    let (kh, kw) = (ks[0], ks[1]);
+    if kernel.shape() != [co, ci, kh, kw] || kernel.datum_type() != f32::datum_type() {
+        return Ok(None);
+    }
+    let Some(unfold) = Unfold::of_pool(&conv.pool_spec, [ci, h, w]) else {
+        return Ok(None);
+    };
+    let bias_plain = bias.try_as_plain_ram()?;
+    let bias_all = bias_plain.as_slice::<f32>()?;
+    let bias: Vec<f32> = if bias.rank() == 0 {
+        vec![bias_all[0]; co]
+    } else if bias.shape() == [co] {
+        bias_all.to_vec()
+    } else {
+        return Ok(None);
+    };
+    Ok(Some(ConvLayer {
+        unfold,
+        batch_axis,
+        x: node.inputs[0],
+        kernel,
+        bias,
+    }))
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! The probes a calibration run reads the int8 layers' activation ranges with: [`RangeProbe`],
 //! an identity op that counts the magnitudes of its input into a [`RangeLog`] under its layer's
 //! name, and [`probe_inputs`], which puts one before the activation of each layer an int8 pass
-//! would take ([`crate::ops::quant_linear::probe_linears`]).
+//! would take ([`crate::ops::quant_linear::probe_linears`], [`crate::ops::quant_conv::probe_convs`]).
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;

@@ -9,7 +9,7 @@
 //! that left L2 between the convolution and them, and on one thread while the products ran
 //! on all); so are the feed-forward layers' ReLUs and residual `Add`s after a [`PackedLinear`]
 //! (`nano`'s BEV encoder: 1.7 of 19.9 ms). [`fuse_epilogues`] takes them into the
-//! [`UnfoldConv`], [`PointwiseConv`], [`PackedLinear`] or [`QuantLinear`] before them: the product's
+//! [`UnfoldConv`], [`PointwiseConv`], [`PackedLinear`], [`QuantLinear`] or [`QuantConv`] before them: the product's
 //! micro-kernel adds the shortcut and applies the floor to each tile while it is still in
 //! registers ([`crate::gemm::Finish`]).
 //!
@@ -29,6 +29,7 @@ use crate::ops::conv_unfold::UnfoldConv;
 use crate::ops::finish::Epilogue;
 use crate::ops::linear::PackedLinear;
 use crate::ops::pointwise::PointwiseConv;
+use crate::ops::quant_conv::QuantConv;
 use crate::ops::quant_linear::QuantLinear;
 
 /// The native products that take an [`Epilogue`].
@@ -37,6 +38,7 @@ enum Finishable<'a> {
     Pointwise(&'a PointwiseConv),
     Linear(&'a PackedLinear),
     Int8Linear(&'a QuantLinear),
+    Int8Conv(&'a QuantConv),
 }
 
 impl Finishable<'_> {
@@ -47,6 +49,8 @@ impl Finishable<'_> {
             Some(Finishable::Pointwise(op))
         } else if let Some(op) = node.op_as::<QuantLinear>() {
             Some(Finishable::Int8Linear(op))
+        } else if let Some(op) = node.op_as::<QuantConv>() {
+            Some(Finishable::Int8Conv(op))
         } else {
             node.op_as::<PackedLinear>().map(Finishable::Linear)
         }
@@ -58,6 +62,7 @@ impl Finishable<'_> {
             Finishable::Pointwise(op) => op.epilogue,
             Finishable::Linear(op) => op.epilogue,
             Finishable::Int8Linear(op) => op.epilogue,
+            Finishable::Int8Conv(op) => op.epilogue,
         }
     }
 
@@ -67,6 +72,7 @@ impl Finishable<'_> {
             Finishable::Pointwise(op) => Box::new(op.with_epilogue(epilogue)),
             Finishable::Linear(op) => Box::new(op.with_epilogue(epilogue)),
             Finishable::Int8Linear(op) => Box::new(op.with_epilogue(epilogue)),
+            Finishable::Int8Conv(op) => Box::new(op.with_epilogue(epilogue)),
         }
     }
 }

@@ -5,7 +5,8 @@
 //! samplers' `Mul -> Reduce<Sum>` corner sums ([`weighted_sum`]), those sums with the pixel
 //! arithmetic that feeds them ([`bilinear`], which needs the corner sums already fused), the
 //! softmaxes ([`softmax`]), the max poolings ([`max_pool`]), the tanh GELUs ([`gelu`]), the
-//! LayerNorms ([`layer_norm`]), where a native product tier runs (AVX-512F by default:
+//! LayerNorms ([`layer_norm`]), with an int8 bundle the int8 convolutions and linear layers
+//! ([`quant_conv`], [`quant_linear`]; every target), where a native product tier runs (AVX-512F by default:
 //! [`gemm::tier`]) the convolutions of 8 channels or more ([`conv_unfold`]), the linear layers ([`linear`]) and the 1x1 convolutions of
 //! channel-first maps ([`pointwise`]) on the native product ([`gemm`]), the ReLU and ResNet
 //! shortcut `Add` after those convolutions taken into them ([`epilogue`]), and (without a native
@@ -26,7 +27,7 @@ use super::{contraction, conv_direct, epilogue, fold, natural_consts};
 use crate::gemm;
 use crate::ops::{
     attention, batched, bilinear, broadcast, conv_unfold, gelu, layer_norm, linear, max_pool,
-    pointwise, quant_linear, range_probe, softmax, weighted_sum,
+    pointwise, quant_conv, quant_linear, range_probe, softmax, weighted_sum,
 };
 
 /// How many native ops the load-time rewrites put into one stage (`optimise`); serialised
@@ -51,11 +52,14 @@ pub struct Rewrites {
     /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on a native product tier only).
     pub unfolded_convs: usize,
+    /// Convolutions run in int8 as [`quant_conv::QuantConv`] (an int8 bundle with calibrated
+    /// ranges; every target).
+    pub int8_convs: usize,
     /// Linear layers run in int8 as [`quant_linear::QuantLinear`] (an int8 bundle with
     /// calibrated ranges; every target).
     pub int8_linears: usize,
-    /// Range probes a calibration load put before linear layers
-    /// ([`quant_linear::probe_linears`]).
+    /// Range probes a calibration load put before convolutions and linear layers
+    /// ([`quant_conv::probe_convs`], [`quant_linear::probe_linears`]).
     pub range_probes: usize,
     /// Linear layers run as [`linear::PackedLinear`] ([`linear::native_linears`]; on a
     /// native product tier only).
@@ -104,7 +108,7 @@ pub(crate) enum Pass {
     NaturalConsts,
 }
 
-/// What a load does with the linear layers the int8 passes take.
+/// What a load does with the convolutions and linear layers the int8 passes take.
 #[derive(Clone, Debug, Default)]
 pub enum Quantisation {
     /// Nothing: the f32 passes.
@@ -162,6 +166,19 @@ pub(crate) fn optimise_before(
     if runs(Pass::LayerNorms) {
         (model, done.layer_norms) = layer_norm::fuse_layer_norms(model)?;
     }
+    // The int8 convolutions (or the calibration's probes) on every target, before the f32
+    // convolutions take them.
+    if runs(Pass::UnfoldConvs) {
+        match quantisation {
+            Quantisation::None => {}
+            Quantisation::Int8 { ranges, tier } => {
+                (model, done.int8_convs) = quant_conv::quantise_convs(model, ranges, *tier)?;
+            }
+            Quantisation::Observe { log, stage } => {
+                (model, done.range_probes) = quant_conv::probe_convs(model, log, stage)?;
+            }
+        }
+    }
     // The native product runs on a tier of satmap-kernels (AVX-512F by default, another when
     // `SATMAP_KERNEL_TIER` forces it); without one, or with `tract` forced, tract's stay.
     let native = gemm::chosen_tier()?.is_some();
@@ -181,7 +198,8 @@ pub(crate) fn optimise_before(
             (model, done.int8_linears) = quant_linear::quantise_linears(model, ranges, *tier)?;
         }
         Quantisation::Observe { log, stage } => {
-            (model, done.range_probes) = quant_linear::probe_linears(model, log, stage)?;
+            let (probed, probes) = quant_linear::probe_linears(model, log, stage)?;
+            (model, done.range_probes) = (probed, done.range_probes + probes);
         }
     }
     if runs(Pass::NativeLinears) && native {
