@@ -33,10 +33,10 @@ pub struct Args {
     /// Memory layout the model must fit (default: the one this binary was built with).
     #[arg(long)]
     pub layout: Option<PathBuf>,
-    /// With `--precision int8`: calibrate the linear layers' activations over synthetic drives
+    /// With `--precision int8`: calibrate the convolutions' and linear layers' activations over synthetic drives
     /// of these world seeds (`a..b`, inside the training split 1000..1160; a seed of the
     /// validation or held-out test split is refused), of the folder compiled here or of an
-    /// already compiled int8 `--bundle` (its stages then kept byte for byte). The bundle's linear layers then run in
+    /// already compiled int8 `--bundle` (its stages then kept byte for byte). The bundle's convolutions and linear layers then run in
     /// int8 with i32 sums (W8A8); without it they widen to f32 (W8A32).
     #[arg(long)]
     pub calibrate: Option<SeedRange>,
@@ -74,7 +74,7 @@ pub fn check_calibration(precision: Precision, seeds: SeedRange, frames: usize) 
     Ok(())
 }
 
-/// The activation ranges of the linear layers of `bundle` (a compiled int8 file) over
+/// The activation ranges of the convolutions and linear layers of `bundle` (a compiled int8 file) over
 /// `frames` frames of a synthetic drive of each world of `seeds`, the engine probing each
 /// layer's input, each range taken by `method` (symmetric; see docs/int8.md).
 ///
