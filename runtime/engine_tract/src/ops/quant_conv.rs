@@ -27,12 +27,15 @@ use crate::ops::finish::Epilogue;
 use crate::ops::range_probe::{RangeLog, probe_inputs};
 use crate::pool;
 
-/// Panels of 16 output pixels a block (one task): its packed patches are at most 16 x 64 bytes
-/// a group of four summed rows (147 KB at `k = 576`, inside L2).
+/// Most panels of 16 output pixels a block (one task).
 const BLOCK_PANELS: usize = 16;
 
-/// Output pixels of a block.
+/// Most output pixels of a block.
 const BLOCK_PIXELS: usize = BLOCK_PANELS * qgemm::QNR;
+
+/// Bytes of a block's packed patches the block size aims under: each tile of weight rows
+/// streams the whole block past it, from L2 (16 panels at `k = 576`, 3 at `k = 4608`).
+const BLOCK_BYTES: usize = 192 << 10;
 
 /// A 2-D convolution in int8 with i32 sums, its output channel-first.
 #[derive(Clone, Debug)]
@@ -317,7 +320,9 @@ impl EvalOp for QuantConv {
         let c = po.as_slice_mut::<f32>()?;
         ensure!(c.len() == m * n, "QuantConv output of {} values", c.len());
         let shared = DisjointPixels(c.as_mut_ptr());
-        let blocks = n.div_ceil(BLOCK_PIXELS);
+        let panel_bytes = depth(&self.quads) * qgemm::pack::LINE;
+        let block_pixels = (BLOCK_BYTES / panel_bytes.max(1)).clamp(1, BLOCK_PANELS) * qgemm::QNR;
+        let blocks = n.div_ceil(block_pixels);
         let done = MAP.with(|map| {
             let mut map = map.borrow_mut();
             let [c4, h, w] = self.quads.input;
@@ -329,8 +334,8 @@ impl EvalOp for QuantConv {
             quantise_quads(xs, self.unfold.input, self.inv_scale, xq);
             let xq = &*xq;
             let task = |b: usize| -> bool {
-                let p0 = b * BLOCK_PIXELS;
-                let cols = BLOCK_PIXELS.min(n - p0);
+                let p0 = b * block_pixels;
+                let cols = block_pixels.min(n - p0);
                 BLOCK.with(|scratch| {
                     let mut scratch = scratch.borrow_mut();
                     if !self.block(xq, (p0, cols), residual, &mut scratch) {

@@ -11,7 +11,7 @@
 //! replaces its frontier (the outlets an input-dependent node or a model output reads) with
 //! constants. The large intermediates (the scores) are then gone from the step altogether.
 //!
-//! Only numeric outlets are folded (not tract's packed-operand values), and only while all the
+//! Only numeric outlets of plain tensors are folded (not tract's packed operands), and only while all the
 //! constants it adds stay within [`FOLD_BUDGET_BYTES`]: a bound on what folding may add to the
 //! resident weights.
 
@@ -60,8 +60,12 @@ pub fn fold_input_independent(mut model: TypedModel) -> TractResult<(TypedModel,
             else {
                 continue;
             };
+            // A packed operand (an exotic fact: `nano`'s int8 kernels over tract's 4 MiB fold
+            // budget, packed by `OptMatMulPack` every step) is not a plain tensor: tract
+            // refuses a constant in its place.
             if read_by_a_step
                 && out.fact.datum_type.is_number()
+                && out.fact.exotic_fact.is_none()
                 && bytes + size <= FOLD_BUDGET_BYTES
             {
                 bytes += size;
@@ -85,7 +89,7 @@ pub fn fold_input_independent(mut model: TypedModel) -> TractResult<(TypedModel,
 
 /// The values of `outlets` (input-independent) through a plan of `model` computing only them.
 /// The model's inputs are fed zeros: no node the plan runs reads them.
-fn evaluate(model: &TypedModel, outlets: &[OutletId]) -> TractResult<TVec<TValue>> {
+pub(crate) fn evaluate(model: &TypedModel, outlets: &[OutletId]) -> TractResult<TVec<TValue>> {
     let inputs = model
         .input_outlets()?
         .iter()

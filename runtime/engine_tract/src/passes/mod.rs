@@ -2,7 +2,8 @@
 //! [`crate::ops`] included), and the passes here only reshape tract's own graph: several-axis
 //! contractions into linear layers ([`contraction`]), image stems to im2col ([`conv_direct`]),
 //! residual `Add` and `ReLU` into a product's last store ([`epilogue`]), weight-only parts
-//! evaluated at load ([`fold`]), constants re-laid with natural strides ([`natural_consts`]).
+//! evaluated at load ([`fold`]), constants re-laid with natural strides ([`natural_consts`]), an
+//! int8 bundle's large weights widened once for the int8 passes ([`widened_weights`]).
 
 pub mod contraction;
 pub mod conv_direct;
@@ -10,3 +11,4 @@ pub mod epilogue;
 pub mod fold;
 pub mod natural_consts;
 pub mod rewrite;
+pub mod widened_weights;

@@ -23,7 +23,7 @@
 
 use tract_nnef::prelude::*;
 
-use super::{contraction, conv_direct, epilogue, fold, natural_consts};
+use super::{contraction, conv_direct, epilogue, fold, natural_consts, widened_weights};
 use crate::gemm;
 use crate::ops::{
     attention, batched, bilinear, broadcast, conv_unfold, gelu, layer_norm, linear, max_pool,
@@ -167,7 +167,10 @@ pub(crate) fn optimise_before(
         (model, done.layer_norms) = layer_norm::fuse_layer_norms(model)?;
     }
     // The int8 convolutions (or the calibration's probes) on every target, before the f32
-    // convolutions take them.
+    // convolutions take them; first the weights tract left widened every step made constants.
+    if runs(Pass::UnfoldConvs) && !matches!(quantisation, Quantisation::None) {
+        (model, _) = widened_weights::fold_widened_weights(model)?;
+    }
     if runs(Pass::UnfoldConvs) {
         match quantisation {
             Quantisation::None => {}

@@ -244,7 +244,8 @@ pub(crate) struct ChannelJob<'a> {
     pub ldc: usize,
 }
 
-/// The channel-first product over tiles of [`QMR`] weight rows and one patch panel: `tile`
+/// The channel-first product over tiles of [`QMR`] weight rows and one patch panel (a tile's
+/// rows against every panel of the block in turn): `tile`
 /// sums a tile (the rows, their count, the panel's lines), then (`offset`: the VNNI tiers'
 /// flipped patches) `128 * row sum` is taken away and the tile finished. Inlined into each
 /// tier's entry, as [`super::drive`].
@@ -257,16 +258,13 @@ pub(crate) fn drive_channels(
 ) {
     let groups = job.kp / 4;
     let mut sums: IntSums = [[0; QNR]; QMR];
-    for panel in 0..job.cols.div_ceil(QNR) {
-        let lines = &job.lines[panel * groups..][..groups];
-        for r0 in (0..job.w.m).step_by(QMR) {
-            let tile_rows = (job.w.m - r0).min(QMR);
-            tile(
-                &job.w.rows[r0 * job.kp..(r0 + tile_rows) * job.kp],
-                tile_rows,
-                lines,
-                &mut sums,
-            );
+    // A tile's weight rows stay in L1 while the block's panels stream past them.
+    for r0 in (0..job.w.m).step_by(QMR) {
+        let tile_rows = (job.w.m - r0).min(QMR);
+        let a = &job.w.rows[r0 * job.kp..(r0 + tile_rows) * job.kp];
+        for panel in 0..job.cols.div_ceil(QNR) {
+            let lines = &job.lines[panel * groups..][..groups];
+            tile(a, tile_rows, lines, &mut sums);
             finish_tile(job, &mut sums, (r0, tile_rows), panel, offset, c);
         }
     }

@@ -166,12 +166,13 @@ pub(super) unsafe fn channels_512(job: &ChannelJob<'_>, c: &mut [f32]) {
     let panels = job.cols.div_ceil(QNR);
     let panel = |p: usize| &job.lines[p * groups..][..groups];
     let mut sums: [IntSums; 2] = [[[0; QNR]; QMR]; 2];
-    let mut p = 0;
-    while p < panels {
-        let pair = p + 2 <= panels;
-        for r0 in (0..m).step_by(QMR) {
-            let rows = (m - r0).min(QMR);
-            let a = job.w.rows_from(r0);
+    // A tile's weight rows stay in L1 while the block's panels stream past them.
+    for r0 in (0..m).step_by(QMR) {
+        let rows = (m - r0).min(QMR);
+        let a = job.w.rows_from(r0);
+        let mut p = 0;
+        while p < panels {
+            let pair = p + 2 <= panels;
             if pair {
                 // SAFETY: the caller's contract; rows `r0..r0 + rows` and panels `p, p + 1`.
                 unsafe { flipped_sums_512::<2>(a, kp, rows, [panel(p), panel(p + 1)], &mut sums) };
@@ -182,8 +183,8 @@ pub(super) unsafe fn channels_512(job: &ChannelJob<'_>, c: &mut [f32]) {
             for (h, s) in sums.iter_mut().enumerate().take(if pair { 2 } else { 1 }) {
                 finish_tile(job, s, (r0, rows), p + h, true, c);
             }
+            p += if pair { 2 } else { 1 };
         }
-        p += if pair { 2 } else { 1 };
     }
 }
 
