@@ -356,7 +356,7 @@ pub fn unfold_convs(mut model: TypedModel) -> TractResult<(TypedModel, usize)> {
 /// A convolution the native passes take, read off its node: one group, NCHW over two spatial
 /// axes (or CHW), batch 1, f32, constant weights and bias.
 #[derive(Clone, Debug)]
-pub(crate) struct ConvLayer {
+pub struct ConvLayer {
     /// Its patches.
     pub unfold: Unfold,
     /// Whether input and output carry a batch axis of 1.
@@ -380,7 +380,7 @@ impl ConvLayer {
 ///
 /// # Errors
 /// tract refusing a fact (an inconsistent model).
-pub(crate) fn conv_layer_at(model: &TypedModel, id: usize) -> TractResult<Option<ConvLayer>> {
+pub fn conv_layer_at(model: &TypedModel, id: usize) -> TractResult<Option<ConvLayer>> {
     let node = model.node(id);
     let Some(conv) = node.op_as::<Conv>() else {
         return Ok(None);

@@ -238,7 +238,7 @@ pub fn quantise_linears(
     Ok((model, done))
 }
 
-/// Put a [`RangeProbe`] into `log` before every layer `layer_at` takes in `stage`; returns the
+/// Put a [`crate::ops::range_probe::RangeProbe`] into `log` before every layer `layer_at` takes in `stage`; returns the
 /// model and the number of probes.
 ///
 /// # Errors
