@@ -138,15 +138,25 @@ $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # models/src/satmap_ref/peers.py. PEERS_FLAGS=--rounds 1 for a quick look.
 # Each bundle also runs in its compiled NNEF form (`<bundle>.satmap`, the form the runtime ships;
 # the default's is committed, nano's and paper's are compiled here, paper against its layout).
+# int8 (`test`): ours on the committed W8A8 bundle against onnxruntime on the stages
+# `satmap_ref.ort_int8` quantises (quantize_static, QDQ) over the frames our calibration uses:
+# training-split worlds 1000..1004, 8 frames each (exported here; the one-drive validation and
+# test splits export-dataset insists on are not read).
 NANO_BUNDLE := models/build/nano
+CALIBRATION_FRAMES := models/build/calibration-frames
 PEERS_FLAGS ?= --rounds 3 --repeats 5
 bench-peers: $(NANO_BUNDLE)/manifest.sha256 $(PAPER_BUNDLE)/manifest.sha256
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
 	target/debug/satmap-sim compile --bundle $(NANO_BUNDLE) --out $(NANO_BUNDLE).satmap
 	target/debug/satmap-sim compile --bundle $(PAPER_BUNDLE) --out $(PAPER_BUNDLE).satmap \
 	  --layout layouts/paper.toml
+	target/debug/satmap-sim export-dataset --out $(CALIBRATION_FRAMES) --train-seeds 1000..1004 \
+	  --val-seeds 2000..2001 --test-seeds 3000..3001 --frames 8 --quiet
+	cd models && .venv/bin/python -m satmap_ref.ort_int8 --bundle bundles/test \
+	  --data build/calibration-frames --out build/test-ort-int8
 	cd models && .venv/bin/python -m satmap_ref.peers --sim ../target/debug/satmap-sim \
 	  --bundle test=bundles/test --bundle nano=build/nano --bundle paper=build/paper \
+	  --int8 test=bundles/test-w8a8.satmap:build/test-ort-int8 \
 	  --threads 1 2 $(PEERS_FLAGS) --out ../docs/perf
 
 $(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)

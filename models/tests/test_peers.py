@@ -81,3 +81,32 @@ def test_every_stage_runs_once_before_any_is_timed():
     assert calls == ["a", "b", "c"] + ["a"] * 3 + ["b"] * 3 + ["c"] * 3
     assert [name for name, _ in timed] == ["a", "b", "c"]
     assert all(len(ms) == 2 and all(t >= 0.0 for t in ms) for _, ms in timed)
+
+
+def test_the_int8_forms_get_a_table_of_their_own_where_they_were_timed():
+    result = _result()
+    run = result["bundles"]["test"]["threads"]["1"]
+    stages = peers._stage_names(BUNDLE)
+    run["median_ms"][peers.SATMAP_INT8] = {s: 8.0 for s in stages}
+    run["median_ms"][peers.ORT_INT8] = {s: 40.0 for s in stages}
+    md = peers.markdown(result, "cmd")
+    # Ours f32 (the folder's, no compiled form here) 10 ms, int8 8; ORT f32 20, int8 40.
+    assert "#### test, 1 thread(s): int8" in md
+    assert "| bev_query | 10.00 | 8.00 | 20.00 | 40.00 | 0.80 | 0.20 |" in md
+    assert "| frame: 6 x image_encoder + the rest | 100.0 | 80.0 | 200.0 | 400.0 | 0.80 | 0.20 |" in md
+    # Without int8 timings, no int8 table.
+    assert "int8" not in peers.markdown(_result(), "cmd")
+
+
+def test_int8_forms_are_named_per_bundle():
+    name, forms = peers._parse_int8("test=bundles/test-w8a8.satmap:build/test-ort-int8")
+    assert name == "test" and forms["satmap"].name == "test-w8a8.satmap"
+    assert forms["ort"].name == "test-ort-int8"
+    spec = {"bundle": BUNDLE, "config": "test", "weights": None, "compiled": None, "int8": forms}
+    assert peers._engines(spec)[-2:] == peers.INT8_ENGINES
+    cmd = peers._engine_cmd(peers.SATMAP_INT8, Path("sim"), spec, 1, 3)
+    assert cmd[cmd.index("--bundle") + 1].endswith("test-w8a8.satmap")
+    assert cmd[cmd.index("--inputs") + 1] == str(BUNDLE)
+    ort = peers._engine_cmd(peers.ORT_INT8, Path("sim"), spec, 1, 3)
+    assert ort[ort.index("--engine") + 1] == "onnxruntime"
+    assert ort[ort.index("--bundle") + 1].endswith("test-ort-int8")

@@ -46,6 +46,11 @@ pub struct Args {
     /// Calibration of the whole-step runs.
     #[arg(long, default_value = "models/calibration/nuscenes_like.toml")]
     pub calibration: PathBuf,
+    /// The folder bundle whose `reference.safetensors` holds the inputs (default: the bundle's
+    /// own, as `--bundle` says), for a compiled form of another name (`test-w8a8.satmap`
+    /// timed on `test`'s inputs).
+    #[arg(long)]
+    pub inputs: Option<PathBuf>,
 }
 
 /// What `bench-stages` prints.
@@ -212,7 +217,8 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
     engine.set_threads(args.threads)?;
     let d = engine.dims().clone();
     // A bundle without a usable reference cannot be benchmarked: bad input (exit 2).
-    let r = ReferenceInputs::load(&args.bundle, &d).map_err(|e| BadArgument(format!("{e:#}")))?;
+    let r = ReferenceInputs::load(args.inputs.as_ref().unwrap_or(&args.bundle), &d)
+        .map_err(|e| BadArgument(format!("{e:#}")))?;
     let mut value = vec![0.0; d.value_len()];
     let mut q = vec![0.0; d.bev_len()];
     let mut w = vec![0.0; d.weights_len()];

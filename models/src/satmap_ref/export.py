@@ -177,13 +177,18 @@ class StagedRunner:
 
     def run_frame(self, frame: Frame, lut: GktLut,
                   camera_ok: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Every interface tensor of one golden `Frame` (see `run_inputs`)."""
+        return self.run_inputs(frame.images, frame.satellite, can_bus(frame), lut, camera_ok)
+
+    def run_inputs(self, images: np.ndarray, satellite: np.ndarray, cb: np.ndarray, lut: GktLut,
+                   camera_ok: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Every interface tensor of one frame, plus `<stage>.<io>` records of each stage call
         (image encoder recorded for camera 0).
         `camera_ok` (bool [C], optional): camera dropout. A dropped camera's image encoder is not
         run (its `value` row is zeros, never read) and the gather-sum leaves it out
         (`gkt.mask_cameras`: mask row 0, count recomputed); the image-encoder record is then
         absent when camera 0 is dropped. None = every camera present (the same bits as before)."""
-        n_cams = frame.images.shape[0]
+        n_cams = images.shape[0]
         ok = (np.ones(n_cams, dtype=bool) if camera_ok is None
               else camera_ok_array(camera_ok, n_cams))
         rec: dict[str, np.ndarray] = {}
@@ -193,7 +198,7 @@ class StagedRunner:
                 values.append(np.zeros((self.cfg.feat_h * self.cfg.feat_w, self.cfg.embed_dims),
                                        dtype=np.float32))
                 continue
-            img = np.ascontiguousarray(frame.images[c])
+            img = np.ascontiguousarray(images[c])
             ci = np.array([c], dtype=np.int64)
             v = self.run_stage("image_encoder", image=img, camera_index=ci)["value"]
             if c == 0:
@@ -201,7 +206,6 @@ class StagedRunner:
                             "image_encoder.value": v})
             values.append(v)
         value = np.stack(values)
-        cb = can_bus(frame)
         bq = self.run_stage("bev_query", can_bus=cb)
         rec.update({"bev_query.can_bus": cb, "bev_query.bev_query": bq["bev_query"],
                     "bev_query.gkt_weights": bq["gkt_weights"]})
@@ -210,8 +214,8 @@ class StagedRunner:
         cam = self.run_stage("bev_encoder", bev_query=bq["bev_query"], gathered=gathered)
         rec.update({"bev_encoder.bev_query": bq["bev_query"], "bev_encoder.gathered": gathered,
                     "bev_encoder.camera_bev": cam["camera_bev"]})
-        sat = self.run_stage("satellite_encoder", satellite=np.ascontiguousarray(frame.satellite))
-        rec.update({"satellite_encoder.satellite": frame.satellite,
+        sat = self.run_stage("satellite_encoder", satellite=np.ascontiguousarray(satellite))
+        rec.update({"satellite_encoder.satellite": satellite,
                     "satellite_encoder.satellite_bev": sat["satellite_bev"]})
         dec = self.run_stage("map_decoder", camera_bev=cam["camera_bev"],
                              satellite_bev=sat["satellite_bev"])

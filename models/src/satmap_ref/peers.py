@@ -29,21 +29,10 @@ import sys
 import time
 from pathlib import Path
 
+from .peers_report import (  # noqa: F401 (BEGIN, END re-exported for the tests)
+    BEGIN, COMPILED, END, ENGINES, INT8_ENGINES, ORT_INT8, SATMAP_INT8, _stage_names, markdown,
+    write_markdown)
 
-def _stage_names(bundle: Path | None = None) -> tuple[str, ...]:
-    """The stages in pipeline order: the bundle manifest's (the onnxruntime worker must not
-    import torch, whose ~600 MB would count as onnxruntime's resident set), else the model's."""
-    if bundle is not None:
-        import tomllib
-        manifest = tomllib.loads((bundle / "manifest.toml").read_text())
-        return tuple(s["name"] for s in manifest["stage"])
-    from .model import STAGE_NAMES
-    return STAGE_NAMES
-
-ENGINES = ("satmap", "onnxruntime", "pytorch")
-# Our runtime on the compiled NNEF form of the same stages (`<bundle>.satmap` beside the folder,
-# what `satmap-sim compile` writes and the product ships): timed where that file exists.
-COMPILED = "satmap-compiled"
 PEAK_N = 2048
 MODELS_ROOT = Path(__file__).resolve().parents[2]
 # The weights each bundle was exported with: the committed trained default, else the seeded
@@ -196,18 +185,23 @@ def _run_json(cmd: list[str], threads: int) -> dict:
 
 
 def _engines(spec: dict) -> tuple[str, ...]:
-    """The engines one bundle runs through: the three, and ours on its compiled form if any."""
-    return ENGINES + ((COMPILED,) if spec.get("compiled") is not None else ())
+    """The engines one bundle runs through: the three, ours on its compiled form if any, and
+    ours and onnxruntime on its int8 forms if named."""
+    return (ENGINES + ((COMPILED,) if spec.get("compiled") is not None else ())
+            + (INT8_ENGINES if spec.get("int8") is not None else ()))
 
 
 def _engine_cmd(engine: str, sim: Path, spec: dict, threads: int, repeats: int) -> list[str]:
-    if engine in ("satmap", COMPILED):
-        bundle = spec["compiled"] if engine == COMPILED else spec["bundle"]
-        return [str(sim), "bench-stages", "--bundle", str(bundle), "--threads",
-                str(threads), "--repeats", str(repeats), "--calibration",
-                str(MODELS_ROOT / "calibration" / "nuscenes_like.toml")]
-    cmd = [sys.executable, "-m", "satmap_ref.peers", "worker", "--engine", engine, "--bundle",
-           str(spec["bundle"]), "--config", spec["config"], "--threads", str(threads),
+    if engine in ("satmap", COMPILED, SATMAP_INT8):
+        bundle = {COMPILED: spec["compiled"], "satmap": spec["bundle"],
+                  SATMAP_INT8: (spec.get("int8") or {}).get("satmap")}[engine]
+        return [str(sim), "bench-stages", "--bundle", str(bundle), "--inputs",
+                str(spec["bundle"]), "--threads", str(threads), "--repeats", str(repeats),
+                "--calibration", str(MODELS_ROOT / "calibration" / "nuscenes_like.toml")]
+    folder = spec["int8"]["ort"] if engine == ORT_INT8 else spec["bundle"]
+    worker = "onnxruntime" if engine == ORT_INT8 else engine
+    cmd = [sys.executable, "-m", "satmap_ref.peers", "worker", "--engine", worker, "--bundle",
+           str(folder), "--config", spec["config"], "--threads", str(threads),
            "--repeats", str(repeats)]
     if spec["weights"] is not None:
         cmd += ["--weights", str(spec["weights"])]
@@ -278,84 +272,14 @@ def _machine() -> dict:
             "python": platform.python_version()}
 
 
-def _step_sum(med: dict[str, float]) -> float:
-    """A frame's stage time: six cameras' image encoders plus the other stages once."""
-    return sum(med[s] * (6 if s == "image_encoder" else 1) for s in med)
-
-
-BEGIN = "<!-- bench-peers: begin (written by `make bench-peers`, do not edit) -->"
-END = "<!-- bench-peers: end -->"
-
-
-def write_markdown(path: Path, block: str) -> None:
-    """Put `block` between the BEGIN/END markers of `path`, keeping the hand-written text
-    around them; a file without markers gets a title and the block."""
-    text = path.read_text() if path.exists() else ""
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        tail = rest.split(END, 1)[1]
-    else:
-        head, tail = "# Speed against onnxruntime and PyTorch\n\n", "\n"
-    path.write_text(f"{head}{BEGIN}\n{block}{END}{tail}")
-
-
-def markdown(result: dict, command: str) -> str:
-    m = result["machine"]
-    lines = [
-        f"Written by `{command}` on {m['cpu']} ({m['cores']} cores, tract kernel family "
-        f"`{m['kernel_family']}`). Medians of every timed repeat of every round, milliseconds; "
-        "every engine in its own process, engines alternating. Inputs: each bundle's "
-        "`reference.safetensors`. GFLOP: matmul/conv FLOPs of the reference stage. "
-        "'% peak' = achieved GFLOP/s over the best large f32 matmul at that thread count. "
-        "'x ORT' = our time over onnxruntime's (below 1 is faster). 'ours' reads the exported "
-        "ONNX folder, as the peers do; 'ours compiled', where the bundle has one, the compiled "
-        "NNEF form of the same stages (`<bundle>.satmap`, the form the runtime ships).",
-        "",
-    ]
-    for t, p in result["peak"].items():
-        by = ", ".join(f"{k} {v:.1f}" for k, v in p["gflops_by_library"].items())
-        lines.append(f"- Peak at {t} thread(s): {p['gflops']:.1f} GFLOP/s, the best of a "
-                     f"{p['n']}^3 f32 matmul through {by}.")
-    lines.append("")
-    for name, b in result["bundles"].items():
-        for t, r in b["threads"].items():
-            peak = result["peak"][t]["gflops"]
-            med = r["median_ms"]
-            # The compiled form's two columns, where it was timed (older results lack it).
-            comp = COMPILED in med
-            c_head, c_rule = (" ours compiled ms | compiled x ORT |", "---|---|") if comp else ("", "")
-            lines += [f"### {name} (config `{b['config']}`), {t} thread(s)", "",
-                      f"| stage | GFLOP | ours ms | ORT ms | PyTorch ms | x ORT | x PyTorch |{c_head} "
-                      "% peak ours / ORT / PyTorch |",
-                      f"|---|---|---|---|---|---|---|{c_rule}---|"]
-            for s in _stage_names():
-                gf = b["flops"][s] / 1e9
-                o, x, y = med["satmap"][s], med["onnxruntime"][s], med["pytorch"][s]
-                pct = " / ".join(f"{100 * gf / (v / 1e3) / peak:.0f}%" for v in (o, x, y))
-                c = f" {med[COMPILED][s]:.2f} | {med[COMPILED][s] / x:.2f} |" if comp else ""
-                lines.append(f"| {s} | {gf:.3f} | {o:.2f} | {x:.2f} | {y:.2f} | {o / x:.2f} | "
-                             f"{o / y:.2f} |{c} {pct} |")
-            sums = [_step_sum(med[e]) for e in ENGINES]
-            step = r["satmap_step_median_ms"]
-            step_txt = f"{step:.1f}" if step is not None else "n/a"
-            c_sum = _step_sum(med[COMPILED]) if comp else 0.0
-            c = f" {c_sum:.1f} | {c_sum / sums[1]:.2f} |" if comp else ""
-            c_empty = " | |" if comp else ""
-            lines.append(f"| frame: 6 x image_encoder + the rest | | {sums[0]:.1f} | "
-                         f"{sums[1]:.1f} | {sums[2]:.1f} | {sums[0] / sums[1]:.2f} | "
-                         f"{sums[0] / sums[2]:.2f} |{c} |")
-            skipped = r["engines"]["satmap"].get("step_skipped")
-            lines.append(f"| our whole step (`SatMap::step`, gather and decode included) | | "
-                         f"{step_txt} | | | | |{c_empty} |")
-            rss = " / ".join(f"{r['engines'][e]['max_rss_kib'] / 1024:.0f}" for e in ENGINES)
-            lines += ["", f"Max RSS per process, MiB (ours / ORT / PyTorch): {rss}."]
-            if comp:
-                lines[-1] += (f" Ours on the compiled form: "
-                              f"{r['engines'][COMPILED]['max_rss_kib'] / 1024:.0f} MiB.")
-            if skipped:
-                lines.append(f"Whole step not timed: {skipped}.")
-            lines.append("")
-    return "\n".join(lines) + "\n"
+def _parse_int8(spec: str) -> tuple[str, dict]:
+    """`NAME=W8A8.satmap:ORT_INT8_DIR`: a bundle's int8 forms (ours compiled and calibrated,
+    onnxruntime's from `satmap_ref.ort_int8`)."""
+    name, rest = spec.split("=", 1)
+    ours, _, ort = rest.partition(":")
+    if not ort:
+        raise ValueError(f"--int8 {spec}: want NAME=W8A8.satmap:ORT_INT8_DIR")
+    return name, {"satmap": Path(ours).resolve(), "ort": Path(ort).resolve()}
 
 
 def _parse_bundle(spec: str) -> dict:
@@ -366,7 +290,7 @@ def _parse_bundle(spec: str) -> dict:
     w = Path(weights).resolve() if weights else DEFAULT_WEIGHTS.get(config)
     compiled = bundle_path.with_name(bundle_path.name + ".satmap")
     return {"name": name, "bundle": bundle_path, "config": config, "weights": w,
-            "compiled": compiled if compiled.is_file() else None}
+            "compiled": compiled if compiled.is_file() else None, "int8": None}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -395,6 +319,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="only rewrite <out>.md from this JSON of an earlier run")
     ap.add_argument("--bundle", action="append", default=[],
                     help="NAME=DIR[:WEIGHTS] of an exported folder bundle (repeatable)")
+    ap.add_argument("--int8", action="append", default=[],
+                    help="NAME=W8A8.satmap:ORT_INT8_DIR: a bundle's int8 forms, timed beside it "
+                         "(repeatable)")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=5, help="timed runs per stage per process")
@@ -407,6 +334,11 @@ def main(argv: list[str] | None = None) -> None:
     if a.sim is None or not a.bundle:
         ap.error("--sim and at least one --bundle are required")
     specs = [_parse_bundle(s) for s in a.bundle]
+    int8 = dict(_parse_int8(s) for s in a.int8)
+    for spec in specs:
+        spec["int8"] = int8.pop(spec["name"], None)
+    if int8:
+        ap.error(f"--int8 for bundles not given: {', '.join(int8)}")
     result = run(a.sim.resolve(), specs, a.threads, a.rounds, a.repeats,
                  log=lambda s: print(s, file=sys.stderr, flush=True))
     command = "python -m satmap_ref.peers " + " ".join(argv)
