@@ -29,8 +29,7 @@ if [[ "$neon" -ne 3 ]]; then
   exit 1
 fi
 # And the integer products' dot-product tier (sdot) against the portable reference: the linear
-# product's 4 tests (qgemm_tiers) and the channel-first (convolution) product's 3
-# (qgemm_channel_tiers).
+# product's 4 tests and the channel-first (convolution) product's 3 (tests/qgemm_tiers.rs).
 sdot=$(grep -c '^test aarch64_dotprod::.* ok$' out/aarch64-tests.log || true)
 if [[ "$sdot" -ne 7 ]]; then
   echo "aarch64: the dotprod integer tier's 7 tests did not all run and pass ($sdot)" >&2

@@ -28,7 +28,7 @@ use satmap_kernels::pooling::{PoolWindow, max_pool_plane};
 
 use crate::gemm;
 use crate::graph::matching::replace_with_op;
-use crate::ops::conv_unfold::{Unfold, with_batch};
+use crate::ops::unfold::{Unfold, with_batch};
 use crate::pool;
 
 /// A 2-D max pooling of `[1, C, H, W]` or `[C, H, W]` f32 (see the module doc).

@@ -30,9 +30,10 @@ use tract_nnef::tract_core::ops::Downsample;
 
 use crate::gemm::{self, NR, PackedA};
 use crate::graph::matching::replace_with_op;
-use crate::ops::conv_unfold::{MIN_OUTPUT_CHANNELS, Unfold, UnfoldConv};
+use crate::ops::conv_unfold::{MIN_OUTPUT_CHANNELS, UnfoldConv};
 use crate::ops::finish::Epilogue;
 use crate::ops::linear::{ConstProduct, bias_after, const_product};
+use crate::ops::unfold::Unfold;
 
 /// Pixels (columns of the product) from which a 1x1 convolution runs natively: one B panel.
 pub const MIN_PIXELS: usize = NR;

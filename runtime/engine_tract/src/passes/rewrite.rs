@@ -52,6 +52,9 @@ pub struct Rewrites {
     /// Convolutions of 8 outputs or more run as [`conv_unfold::UnfoldConv`] on the native
     /// product ([`conv_unfold::unfold_convs`]; on a native product tier only).
     pub unfolded_convs: usize,
+    /// An int8 bundle's weights tract leaves widened every step, widened once at load for the
+    /// int8 passes ([`widened_weights::fold_widened_weights`]; with calibrated ranges only).
+    pub widened_weights: usize,
     /// Convolutions run in int8 as [`quant_conv::QuantConv`] (an int8 bundle with calibrated
     /// ranges; every target).
     pub int8_convs: usize,
@@ -168,8 +171,13 @@ pub(crate) fn optimise_before(
     }
     // The int8 convolutions (or the calibration's probes) on every target, before the f32
     // convolutions take them; first the weights tract left widened every step made constants.
-    if runs(Pass::UnfoldConvs) && !matches!(quantisation, Quantisation::None) {
-        (model, _) = widened_weights::fold_widened_weights(model)?;
+    let quantising = match quantisation {
+        Quantisation::None => false,
+        Quantisation::Int8 { ranges, .. } => !ranges.is_empty(),
+        Quantisation::Observe { .. } => true,
+    };
+    if runs(Pass::UnfoldConvs) && quantising {
+        (model, done.widened_weights) = widened_weights::fold_widened_weights(model)?;
     }
     if runs(Pass::UnfoldConvs) {
         match quantisation {

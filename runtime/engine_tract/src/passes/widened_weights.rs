@@ -10,6 +10,8 @@
 //! are the ones a step would compute), leaving constants the int8 passes quantise back to the
 //! stored int8 values. It runs only for an int8 load with ranges or a calibration
 //! ([`super::rewrite::Quantisation`]): the W8A32 load keeps the int8 weights in RAM, by design.
+//! A widened weight no int8 pass takes (a layer without a range, a grouped convolution) stays
+//! an f32 constant: more RAM than W8A32's, and a step without its widening.
 
 use tract_nnef::internal::*;
 use tract_nnef::tract_core::ops::binary::TypedBinOp;
@@ -74,4 +76,58 @@ pub fn fold_widened_weights(mut model: TypedModel) -> TractResult<(TypedModel, u
     }
     patch.apply(&mut model)?;
     Ok((model.into_compact()?, frontier.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    //! A widening as an int8 bundle stores it (`Cast` of an int8 constant, `Mul` by its scales,
+    //! an axis change) evaluated once into the constant a step computed, bit for bit.
+    use super::*;
+    use crate::test_support::{bits, run_plain};
+    use tract_nnef::tract_core::ops::math;
+
+    #[test]
+    fn a_widening_becomes_the_constant_a_step_computed() {
+        // Over tract's 4 MiB fold budget once widened (smaller, tract folds it as it wires).
+        let (o, i) = (1100, 1024);
+        let mut model = TypedModel::default();
+        let x = model.add_source("x", f32::fact([i, o])).unwrap();
+        let q: Vec<i8> = (0..o * i).map(|v| ((v * 37) % 255) as u8 as i8).collect();
+        let q = Tensor::from_shape(&[o, i], &q).unwrap();
+        let q = model.add_const("w_int8", q).unwrap();
+        let wide = model
+            .wire_node("wide", Cast::new(f32::datum_type()), &[q])
+            .unwrap()[0];
+        let scales: Vec<f32> = (0..o).map(|c| 1e-3 * (1 + c % 7) as f32).collect();
+        let s = Tensor::from_shape(&[o, 1], &scales).unwrap();
+        let s = model.add_const("scale", s).unwrap();
+        let w = model.wire_node("w", math::mul(), &[wide, s]).unwrap()[0];
+        let wt = model.wire_node("wt", AxisOp::Move(0, 1), &[w]).unwrap()[0];
+        let y = model.wire_node("y", math::add(), &[x, wt]).unwrap();
+        model.select_output_outlets(&y).unwrap();
+        let input = tvec![
+            Tensor::from_shape(&[i, o], &vec![1.0f32; i * o])
+                .unwrap()
+                .into_tvalue()
+        ];
+        let want = run_plain(model.clone(), &input);
+        let (folded, n) = fold_widened_weights(model).unwrap();
+        assert_eq!(n, 1, "the chain's last outlet, read by the step");
+        assert!(!folded.nodes().iter().any(|n| n.op_is::<Cast>()));
+        let got = run_plain(folded, &input);
+        assert_eq!(bits(&got[0]), bits(&want[0]));
+    }
+
+    #[test]
+    fn a_model_without_int8_constants_is_left_alone() {
+        let mut model = TypedModel::default();
+        let x = model.add_source("x", f32::fact([4])).unwrap();
+        let c = model
+            .add_const("c", Tensor::from_shape(&[4], &[1.0f32; 4]).unwrap())
+            .unwrap();
+        let y = model.wire_node("y", math::mul(), &[x, c]).unwrap();
+        model.select_output_outlets(&y).unwrap();
+        let (_, n) = fold_widened_weights(model).unwrap();
+        assert_eq!(n, 0);
+    }
 }

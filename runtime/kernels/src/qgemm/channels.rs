@@ -34,9 +34,9 @@ impl QRows {
     /// scale (an int8 bundle's convolution kernels) come back as exactly those int8 values.
     ///
     /// # Errors
-    /// `w` not `m x k`, or `k` over [`MAX_K`].
+    /// `w` not `m x k` or `k` zero, or `k` over [`MAX_K`].
     pub fn quantise(w: &[f32], m: usize, k: usize) -> Result<(Self, Vec<f32>), PackError> {
-        if m.checked_mul(k) != Some(w.len()) {
+        if k == 0 || m.checked_mul(k) != Some(w.len()) {
             return Err(PackError::Size {
                 len: w.len(),
                 k,
@@ -59,9 +59,9 @@ impl QRows {
     /// Rows `q [m][k]` (row-major int8) as they are.
     ///
     /// # Errors
-    /// `q` not `m x k`, or `k` over [`MAX_K`].
+    /// `q` not `m x k` or `k` zero, or `k` over [`MAX_K`].
     pub fn from_int8(q: &[i8], m: usize, k: usize) -> Result<Self, PackError> {
-        if m.checked_mul(k) != Some(q.len()) {
+        if k == 0 || m.checked_mul(k) != Some(q.len()) {
             return Err(PackError::Size {
                 len: q.len(),
                 k,
@@ -106,12 +106,6 @@ impl QRows {
     pub(crate) fn rows_from(&self, r0: usize) -> &[i8] {
         &self.rows[r0 * padded_k(self.k)..]
     }
-
-    /// Bytes the rows and their sums take.
-    #[must_use]
-    pub fn bytes(&self) -> usize {
-        self.rows.len() + self.row_sums.len() * 4
-    }
 }
 
 /// The finish of the channel-first product, per row (output channel).
@@ -131,14 +125,15 @@ pub struct RowFinish<'a> {
 /// Group `g` (summed rows `4g..4g + 4`) of a block of patch panels from four rows of the
 /// block's columns (`rows[j][col]` is summed row `4g + j` at the block's column `col`; a
 /// missing row past `k` is all zeros): panel `p`'s line `g` is `lines[p * groups + g]`. Each
-/// row holds at least `QNR * panels` values, `panels = lines.len() / groups`.
-pub fn interleave_group(rows: [&[i8]; 4], lines: &mut [Line], groups: usize, g: usize) {
-    if groups == 0 {
-        return;
+/// row holds at least `QNR * panels` values, `panels = lines.len() / groups`. Returns `false`
+/// (nothing written) when `g` is not below `groups` or a row is shorter.
+pub fn interleave_group(rows: [&[i8]; 4], lines: &mut [Line], groups: usize, g: usize) -> bool {
+    if g >= groups {
+        return false;
     }
     let panels = lines.len() / groups;
     if rows.iter().any(|r| r.len() < panels * QNR) {
-        return;
+        return false;
     }
     for p in 0..panels {
         let quad: [&[i8]; 4] = core::array::from_fn(|j| &rows[j][p * QNR..][..QNR]);
@@ -160,6 +155,7 @@ pub fn interleave_group(rows: [&[i8]; 4], lines: &mut [Line], groups: usize, g: 
         }
     }
     const _: () = assert!(LINE == 4 * QNR);
+    true
 }
 
 /// `c[o][col] = finish(sum_k w[o][k] * x[k][col])` for every row of `w` and the `cols`
@@ -182,7 +178,13 @@ pub fn channel_product(
     }
     let (m, kp) = (w.m, padded_k(w.k));
     let panels = cols.div_ceil(QNR);
-    check("lines", lines.len(), panels * (kp / 4))?;
+    // Sizes a caller could overflow compare as "more than any slice holds".
+    let span = |rows: usize, ld: usize| {
+        rows.checked_mul(ld)
+            .and_then(|v| v.checked_add(cols))
+            .unwrap_or(usize::MAX)
+    };
+    check("lines", lines.len(), panels.saturating_mul(kp / 4))?;
     check("scale", finish.scale.len(), m)?;
     if let Some(bias) = finish.bias {
         check("bias", bias.len(), m)?;
@@ -190,10 +192,10 @@ pub fn channel_product(
     if m == 0 || cols == 0 {
         return Ok(());
     }
-    check("c", c.len(), (m - 1) * ldc + cols)?;
+    check("c", c.len(), span(m - 1, ldc))?;
     check("ldc", ldc, cols)?;
     if let Some((res, ld)) = finish.residual {
-        check("residual", res.len(), (m - 1) * ld + cols)?;
+        check("residual", res.len(), span(m - 1, ld))?;
         check("residual ld", ld, cols)?;
     }
     let job = ChannelJob {
@@ -357,12 +359,20 @@ mod tests {
             .map(|j| (0..panels * QNR).map(|c| (j * 40 + c) as i8).collect())
             .collect();
         let mut lines = vec![Line([0; LINE]); panels * groups];
-        interleave_group(
+        assert!(interleave_group(
             [&rows[0], &rows[1], &rows[2], &rows[3]],
             &mut lines,
             groups,
             1,
-        );
+        ));
+        let short = [0i8; 3];
+        assert!(!interleave_group([&short; 4], &mut lines, groups, 1));
+        assert!(!interleave_group(
+            [&rows[0], &rows[1], &rows[2], &rows[3]],
+            &mut lines,
+            groups,
+            groups
+        ));
         for p in 0..panels {
             for c in 0..QNR {
                 for (j, row) in rows.iter().enumerate() {

@@ -58,14 +58,21 @@ impl IntTier {
         match self {
             Self::Generic => true,
             #[cfg(target_arch = "x86_64")]
-            Self::X86_64Avx2 => std::is_x86_feature_detected!("avx2"),
+            // Every feature the tier's functions enable (`target_feature`), so their safety
+            // contracts hold.
+            Self::X86_64Avx2 => {
+                std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+            }
             #[cfg(target_arch = "x86_64")]
             Self::X86_64AvxVnni => {
-                std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("avxvnni")
+                std::is_x86_feature_detected!("avx2")
+                    && std::is_x86_feature_detected!("fma")
+                    && std::is_x86_feature_detected!("avxvnni")
             }
             #[cfg(target_arch = "x86_64")]
             Self::X86_64Avx512Vnni => {
                 std::is_x86_feature_detected!("avx512f")
+                    && std::is_x86_feature_detected!("avx512bw")
                     && std::is_x86_feature_detected!("avx512vnni")
             }
             #[cfg(target_arch = "aarch64")]

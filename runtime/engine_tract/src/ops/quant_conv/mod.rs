@@ -18,14 +18,20 @@
 
 use std::collections::BTreeMap;
 
-use satmap_kernels::qgemm::{self, IntTier, Line, QRows, RowFinish, quantize};
+use std::sync::Mutex;
+
+use satmap_kernels::qgemm::{self, IntTier, Line, QProductError, QRows, RowFinish, quantize};
 use tract_nnef::internal::*;
 
 use crate::graph::matching::replace_with_op;
-use crate::ops::conv_unfold::{ConvLayer, Unfold, conv_layer_at, with_batch};
+use crate::ops::conv_layer::{ConvLayer, conv_layer_at};
 use crate::ops::finish::Epilogue;
 use crate::ops::range_probe::{RangeLog, probe_inputs};
+use crate::ops::unfold::{Unfold, with_batch};
 use crate::pool;
+
+mod quad_map;
+use quad_map::{quad_order, quad_unfold, quantise_quads};
 
 /// Most panels of 16 output pixels a block (one task).
 const BLOCK_PANELS: usize = 16;
@@ -34,7 +40,7 @@ const BLOCK_PANELS: usize = 16;
 const BLOCK_PIXELS: usize = BLOCK_PANELS * qgemm::QNR;
 
 /// Bytes of a block's packed patches the block size aims under: each tile of weight rows
-/// streams the whole block past it, from L2 (16 panels at `k = 576`, 3 at `k = 4608`).
+/// streams the whole block past it, from L2 (16 panels at `k = 576`, 2 at `k = 4608`).
 const BLOCK_BYTES: usize = 192 << 10;
 
 /// A 2-D convolution in int8 with i32 sums, its output channel-first.
@@ -46,7 +52,7 @@ pub struct QuantConv {
     pub batch_axis: bool,
     /// The shortcut and ReLU after the bias ([`crate::passes::epilogue`]).
     pub epilogue: Epilogue,
-    /// The patches of the quantised map, whose values are four channels' bytes (the quad map, [`quad_unfold`]).
+    /// The patches of the quantised map, whose values are four channels' bytes (the quad map, [`quad_map`]).
     quads: Unfold,
     /// `1 / activation scale`.
     inv_scale: f32,
@@ -87,8 +93,14 @@ impl QuantConv {
         abs_max: f32,
         tier: IntTier,
     ) -> TractResult<Self> {
-        let quads = quad_unfold(&unfold);
         let m = bias.len();
+        let k = depth(&unfold);
+        ensure!(
+            k > 0 && w.len() == m * k,
+            "QuantConv: {} weights for {m} channels of depth {k}",
+            w.len()
+        );
+        let quads = quad_unfold(&unfold);
         let w = quad_order(&unfold, w, m);
         let (weights, w_scales) = QRows::quantise(&w, m, depth(&quads) * 4)?;
         let a_scale = quantize::scale_for(abs_max);
@@ -133,7 +145,7 @@ impl QuantConv {
         (p0, cols): (usize, usize),
         residual: Option<&[f32]>,
         scratch: &mut BlockScratch,
-    ) -> bool {
+    ) -> Result<(), QProductError> {
         let groups = depth(&self.quads);
         let panels = cols.div_ceil(qgemm::QNR);
         let width = panels * qgemm::QNR;
@@ -161,61 +173,7 @@ impl QuantConv {
             floor: self.epilogue.floor,
         };
         let local = &mut local[..m * cols];
-        qgemm::channel_product(self.tier, &self.weights, lines, cols, finish, local, cols).is_ok()
-    }
-}
-
-/// `unfold` over the quantised input map's four-channel values. The map's form (the *quad
-/// map*): `[ceil(C / 4), H, W]` values of four bytes, value `(c4, y,
-/// x)` holding channels `4 * c4 .. 4 * c4 + 4` at pixel `(y, x)` (zeros past `C`). A patch row of
-/// such a map is, for each pixel, four summed `k` values at once: a line of the product's panel
-/// (16 pixels' four bytes) is 16 consecutive values of it, so a block is packed by the f32
-/// convolution's own gathering ([`Unfold::patch_row`], here over `u32`) and a copy, with no
-/// byte shuffling. The summed axis is ordered (channel group, kernel row, kernel column,
-/// channel in group); the weights are laid out in that order at load ([`quad_order`]), and an
-/// exact integer sum does not depend on the order.
-fn quad_unfold(unfold: &Unfold) -> Unfold {
-    let [c, h, w] = unfold.input;
-    Unfold {
-        input: [c.div_ceil(4), h, w],
-        ..unfold.clone()
-    }
-}
-
-/// OIHW weights `w` of `m` output channels in the order of the quad map's summed axis ([`quad_unfold`]),
-/// zeros for the channels past `C`.
-fn quad_order(unfold: &Unfold, w: &[f32], m: usize) -> Vec<f32> {
-    let [c, _, _] = unfold.input;
-    let [kh, kw] = unfold.kernel;
-    let taps = kh * kw;
-    let k4 = c.div_ceil(4) * 4 * taps;
-    let mut out = vec![0.0f32; m * k4];
-    for (o, dst) in out.chunks_exact_mut(k4.max(1)).enumerate() {
-        for ch in 0..c {
-            for t in 0..taps {
-                if let Some(&v) = w.get((o * c + ch) * taps + t) {
-                    dst[((ch / 4) * taps + t) * 4 + ch % 4] = v;
-                }
-            }
-        }
-    }
-    out
-}
-
-/// `x` (`[C, H, W]` f32) quantised with `inv_scale` into a quad map ([`quad_unfold`]) `out` of `ceil(C / 4) * H
-/// * W` values.
-fn quantise_quads(x: &[f32], [c, h, w]: [usize; 3], inv_scale: f32, out: &mut [u32]) {
-    let plane = h * w;
-    for (c4, dst) in out.chunks_exact_mut(plane.max(1)).enumerate() {
-        let chan = |j: usize| -> Option<&[f32]> {
-            let ch = 4 * c4 + j;
-            (ch < c).then(|| &x[ch * plane..][..plane])
-        };
-        let [a, b, cc, d] = [chan(0), chan(1), chan(2), chan(3)];
-        for (i, v) in dst.iter_mut().enumerate() {
-            let q = |p: Option<&[f32]>| p.map_or(0, |p| quantize::quantize(p[i], inv_scale) as u8);
-            *v = u32::from_le_bytes([q(a), q(b), q(cc), q(d)]);
-        }
+        qgemm::channel_product(self.tier, &self.weights, lines, cols, finish, local, cols)
     }
 }
 
@@ -254,7 +212,7 @@ impl BlockScratch {
 }
 
 std::thread_local! {
-    /// The quantised input map of the convolution this thread is running (the quad map, [`quad_unfold`]).
+    /// The quantised input map of the convolution this thread is running (the quad map, [`quad_map`]).
     static MAP: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
     /// This thread's block buffers.
     static BLOCK: std::cell::RefCell<BlockScratch> = std::cell::RefCell::new(BlockScratch::default());
@@ -323,47 +281,56 @@ impl EvalOp for QuantConv {
         let panel_bytes = depth(&self.quads) * qgemm::pack::LINE;
         let block_pixels = (BLOCK_BYTES / panel_bytes.max(1)).clamp(1, BLOCK_PANELS) * qgemm::QNR;
         let blocks = n.div_ceil(block_pixels);
-        let done = MAP.with(|map| {
-            let mut map = map.borrow_mut();
-            let [c4, h, w] = self.quads.input;
-            let len = c4 * h * w;
-            if map.len() < len {
-                map.resize(len, 0);
-            }
-            let xq = &mut map[..len];
-            quantise_quads(xs, self.unfold.input, self.inv_scale, xq);
-            let xq = &*xq;
-            let task = |b: usize| -> bool {
-                let p0 = b * block_pixels;
-                let cols = block_pixels.min(n - p0);
-                BLOCK.with(|scratch| {
-                    let mut scratch = scratch.borrow_mut();
-                    if !self.block(xq, (p0, cols), residual, &mut scratch) {
-                        return false;
+        // The map taken out of its thread-local for the run and put back after, so that no
+        // borrow is held while the pool runs tasks (a waiting worker may run other jobs).
+        let mut map = MAP.take();
+        let [c4, h, w] = self.quads.input;
+        let len = c4 * h * w;
+        if map.len() < len {
+            map.resize(len, 0);
+        }
+        quantise_quads(xs, self.unfold.input, self.inv_scale, &mut map[..len]);
+        let xq = &map[..len];
+        // The first error of a task (a tier this CPU lacks, a mis-sized operand: bugs, never
+        // input), returned as it is.
+        let failed: Mutex<Option<QProductError>> = Mutex::new(None);
+        let task = |b: usize| -> bool {
+            let p0 = b * block_pixels;
+            let cols = block_pixels.min(n - p0);
+            BLOCK.with(|scratch| {
+                let mut scratch = scratch.borrow_mut();
+                if let Err(e) = self.block(xq, (p0, cols), residual, &mut scratch) {
+                    let mut first = failed
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                    first.get_or_insert(e);
+                    return false;
+                }
+                for (o, row) in scratch.local.chunks_exact(cols).take(m).enumerate() {
+                    // SAFETY: the output holds `m * n` values (checked above) and stays
+                    // mutably borrowed until every task has returned; channel `o`'s pixels
+                    // `p0..p0 + cols` lie inside it, and no other task writes them (tasks
+                    // own disjoint blocks of pixels) or reads the output.
+                    unsafe {
+                        std::ptr::copy_nonoverlapping(row.as_ptr(), shared.at(o * n + p0), cols);
                     }
-                    for (o, row) in scratch.local.chunks_exact(cols).take(m).enumerate() {
-                        // SAFETY: the output holds `m * n` values (checked above) and stays
-                        // mutably borrowed until every task has returned; channel `o`'s pixels
-                        // `p0..p0 + cols` lie inside it, and no other task writes them (tasks
-                        // own disjoint blocks of pixels) or reads the output.
-                        unsafe {
-                            std::ptr::copy_nonoverlapping(
-                                row.as_ptr(),
-                                shared.at(o * n + p0),
-                                cols,
-                            );
-                        }
-                    }
-                    true
-                })
-            };
-            if pool::worth_threads(m * depth(&self.unfold) * n) && !pool::in_task() {
-                pool::on_pool(blocks, task)
-            } else {
-                (0..blocks).all(task)
-            }
-        });
-        ensure!(done, "integer convolution refused (operands mis-sized)");
+                }
+                true
+            })
+        };
+        let done = if pool::worth_threads(m * depth(&self.unfold) * n) && !pool::in_task() {
+            pool::on_pool(blocks, task)
+        } else {
+            (0..blocks).all(task)
+        };
+        MAP.set(map);
+        if let Some(e) = failed
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+        {
+            return Err(e.into());
+        }
+        ensure!(done, "integer convolution: a task failed");
         Ok(tvec!(out.into_tvalue()))
     }
 }
@@ -564,25 +531,55 @@ mod tests {
 
     #[test]
     fn the_fused_shortcut_and_floor_give_the_unfused_bits() {
-        let (op, x) = op_of(&ConvShape::new(16, 24, [23, 41], 3, 2, 1));
-        let plain = values(&op.eval_out_of_plan(x.clone()).unwrap().unwrap()[0]);
-        let shape = op.output_shape();
-        let res: Vec<f32> = (0..plain.len())
-            .map(|i| ((i * 7) % 11) as f32 / 5.0 - 1.0)
-            .collect();
-        let want: Vec<u32> = plain
-            .iter()
-            .zip(&res)
-            .map(|(&v, &r)| satmap_kernels::gemm::floor(v + r, 0.0).to_bits())
-            .collect();
-        let fused = op.with_epilogue(Epilogue {
-            residual: true,
-            floor: Some(0.0),
-        });
-        let mut inputs = x;
-        inputs.push(Tensor::from_shape(&shape, &res).unwrap().into_tvalue());
-        let got = fused.eval_out_of_plan(inputs).unwrap().unwrap();
-        assert_eq!(bits(&got[0]), want);
+        // One block, and four blocks with a ragged last one (the shortcut read from each
+        // block's first pixel on), on one thread and on two.
+        for s in [
+            ConvShape::new(16, 24, [23, 41], 3, 2, 1),
+            ConvShape::new(64, 32, [20, 40], 3, 1, 1),
+        ] {
+            let (op, x) = op_of(&s);
+            let plain = values(&op.eval_out_of_plan(x.clone()).unwrap().unwrap()[0]);
+            let shape = op.output_shape();
+            let res: Vec<f32> = (0..plain.len())
+                .map(|i| ((i * 7) % 11) as f32 / 5.0 - 1.0)
+                .collect();
+            let want: Vec<u32> = plain
+                .iter()
+                .zip(&res)
+                .map(|(&v, &r)| satmap_kernels::gemm::floor(v + r, 0.0).to_bits())
+                .collect();
+            let fused = op.with_epilogue(Epilogue {
+                residual: true,
+                floor: Some(0.0),
+            });
+            let mut inputs = x;
+            inputs.push(Tensor::from_shape(&shape, &res).unwrap().into_tvalue());
+            let got = fused.eval_out_of_plan(inputs.clone()).unwrap().unwrap();
+            assert_eq!(bits(&got[0]), want, "{} -> {}", s.ci, s.co);
+            let two = on_two_threads(|| fused.eval_out_of_plan(inputs).unwrap().unwrap());
+            assert_eq!(bits(&two[0]), want, "{} -> {} on two threads", s.ci, s.co);
+        }
+    }
+
+    #[test]
+    fn weights_of_another_size_are_refused() {
+        let (op, _) = op_of(&ConvShape::new(8, 4, [9, 7], 3, 1, 1));
+        let bias = vec![0.0f32; 4];
+        for len in [4 * 72 - 1, 4 * 72 + 1, 0] {
+            let w = vec![0.1f32; len];
+            assert!(
+                QuantConv::new(
+                    op.unfold.clone(),
+                    true,
+                    &w,
+                    bias.clone(),
+                    1.0,
+                    IntTier::Generic
+                )
+                .is_err(),
+                "{len} weights"
+            );
+        }
     }
 
     #[test]
