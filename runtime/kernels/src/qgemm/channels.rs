@@ -1,6 +1,7 @@
 //! The channel-first integer product of a convolution: `c[o][p] = finish(sum_k w[o][k] *
 //! x[k][p])`, the weights' rows (output channels, [`QRows`]) times the patches of a block of
-//! output pixels packed in [`Line`] panels ([`interleave_group`]), the output in the
+//! output pixels packed in [`Line`] panels (the engine packs them from its quantised map), the
+//! output in the
 //! convolution's own layout (a channel's pixels in a row), finished per row: the activation's
 //! scale times the channel's weight scale, the channel's bias, a residual, a floor.
 //!
@@ -13,7 +14,7 @@
 //! unsigned operand of `vpdpbusd`) and take away `128 * row sum` of the weights, stored at
 //! quantisation, so the correction needs no pass over the patches.
 
-use super::pack::{LINE, Line, padded_k};
+use super::pack::{Line, padded_k};
 use super::quantize::{quantize, scale_for};
 use super::{IntSums, IntTier, MAX_K, PackError, QMR, QNR, QProductError, check};
 use crate::gemm::floor;
@@ -120,42 +121,6 @@ pub struct RowFinish<'a> {
     pub residual: Option<(&'a [f32], usize)>,
     /// `max(v, floor)` last, with [`floor`]'s bits.
     pub floor: Option<f32>,
-}
-
-/// Group `g` (summed rows `4g..4g + 4`) of a block of patch panels from four rows of the
-/// block's columns (`rows[j][col]` is summed row `4g + j` at the block's column `col`; a
-/// missing row past `k` is all zeros): panel `p`'s line `g` is `lines[p * groups + g]`. Each
-/// row holds at least `QNR * panels` values, `panels = lines.len() / groups`. Returns `false`
-/// (nothing written) when `g` is not below `groups` or a row is shorter.
-pub fn interleave_group(rows: [&[i8]; 4], lines: &mut [Line], groups: usize, g: usize) -> bool {
-    if g >= groups {
-        return false;
-    }
-    let panels = lines.len() / groups;
-    if rows.iter().any(|r| r.len() < panels * QNR) {
-        return false;
-    }
-    for p in 0..panels {
-        let quad: [&[i8]; 4] = core::array::from_fn(|j| &rows[j][p * QNR..][..QNR]);
-        let line = &mut lines[p * groups + g].0;
-        // Built as one u32 a column, which the compiler turns into byte shuffles.
-        let mut words = [0u32; QNR];
-        for (c, w) in words.iter_mut().enumerate() {
-            *w = u32::from_le_bytes([
-                quad[0][c] as u8,
-                quad[1][c] as u8,
-                quad[2][c] as u8,
-                quad[3][c] as u8,
-            ]);
-        }
-        for (dst, w) in line.chunks_exact_mut(4).zip(words) {
-            for (d, b) in dst.iter_mut().zip(w.to_le_bytes()) {
-                *d = b as i8;
-            }
-        }
-    }
-    const _: () = assert!(LINE == 4 * QNR);
-    true
 }
 
 /// `c[o][col] = finish(sum_k w[o][k] * x[k][col])` for every row of `w` and the `cols`
@@ -350,36 +315,5 @@ mod tests {
             assert!((scales[o] - s[o]).abs() <= s[o] * 1e-6);
         }
         assert!(QRows::quantise(&w[1..], m, k).is_err());
-    }
-
-    #[test]
-    fn a_group_interleaves_four_rows_into_each_panels_line() {
-        let (panels, groups) = (2, 3);
-        let rows: Vec<Vec<i8>> = (0..4)
-            .map(|j| (0..panels * QNR).map(|c| (j * 40 + c) as i8).collect())
-            .collect();
-        let mut lines = vec![Line([0; LINE]); panels * groups];
-        assert!(interleave_group(
-            [&rows[0], &rows[1], &rows[2], &rows[3]],
-            &mut lines,
-            groups,
-            1,
-        ));
-        let short = [0i8; 3];
-        assert!(!interleave_group([&short; 4], &mut lines, groups, 1));
-        assert!(!interleave_group(
-            [&rows[0], &rows[1], &rows[2], &rows[3]],
-            &mut lines,
-            groups,
-            groups
-        ));
-        for p in 0..panels {
-            for c in 0..QNR {
-                for (j, row) in rows.iter().enumerate() {
-                    assert_eq!(lines[p * groups + 1].0[4 * c + j], row[p * QNR + c]);
-                }
-            }
-            assert!(lines[p * groups].0.iter().all(|&v| v == 0));
-        }
     }
 }

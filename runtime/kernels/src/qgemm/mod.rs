@@ -31,7 +31,7 @@ mod x86_64_avx2;
 #[cfg(target_arch = "x86_64")]
 mod x86_64_vnni;
 
-pub use channels::{QRows, RowFinish, channel_product, interleave_group};
+pub use channels::{QRows, RowFinish, channel_product};
 pub use pack::{Line, PackError, PackedQB, padded_k};
 pub use tier::{INT_TIER_ENV, IntTier, IntTierError};
 

@@ -5,30 +5,22 @@
 //! values.
 
 use satmap_kernels::gemm::floor;
-use satmap_kernels::qgemm::{
-    self, IntTier, Line, QProductError, QRows, RowFinish, interleave_group, padded_k,
-};
+use satmap_kernels::qgemm::{self, IntTier, Line, QProductError, QRows, RowFinish, padded_k};
 
 use super::{bytes, floats};
 
-/// Patches `x [k][cols]` packed as the product reads them, through `interleave_group`.
+/// Patches `x [k][cols]` packed as the product reads them (`qgemm::pack`'s line layout): panel
+/// `p`'s line `g` holds, for each of its 16 columns `c` in turn, summed rows `4g..4g + 4` of
+/// column `16p + c`; zeros past `k` and past `cols`.
 fn patch_lines(x: &[i8], k: usize, cols: usize) -> Vec<Line> {
     let groups = padded_k(k) / 4;
     let panels = cols.div_ceil(16);
-    let width = panels * 16;
     let mut lines = vec![Line([0; 64]); panels * groups];
-    let zero = vec![0i8; width];
-    let rows: Vec<Vec<i8>> = (0..k)
-        .map(|kk| {
-            let mut r = x[kk * cols..][..cols].to_vec();
-            r.resize(width, 0);
-            r
-        })
-        .collect();
-    for g in 0..groups {
-        let quad: [&[i8]; 4] =
-            core::array::from_fn(|j| rows.get(4 * g + j).unwrap_or(&zero).as_slice());
-        assert!(interleave_group(quad, &mut lines, groups, g));
+    for kk in 0..k {
+        for col in 0..cols {
+            let (p, c) = (col / 16, col % 16);
+            lines[p * groups + kk / 4].0[4 * c + kk % 4] = x[kk * cols + col];
+        }
     }
     lines
 }
