@@ -1,5 +1,6 @@
 //! The engine's pool as the native ops use it: how an op splits its work over the engine's
-//! threads (`on_threads`, `on_pool`), when a product is worth it, and the mark that keeps a
+//! threads (`on_threads`, `on_pool`, and `DisjointParts` for tasks that write their own parts of
+//! one output), when a product is worth it, and the mark that keeps a
 //! product inside a task on its thread. The pool is tract's executor of the running plan
 //! (`TractEngine::set_threads`), never rayon's global one.
 
@@ -75,6 +76,27 @@ where
         _ => data.chunks_mut(chunk).enumerate().all(|(i, c)| task(i, c)),
     }
 }
+
+/// An op's output, shared by the tasks of its split, each of which writes its own part only
+/// (the native product's column panels, the int8 convolution's pixel blocks): the tasks copy
+/// their results into place through this pointer while the op holds the output's mutable borrow.
+pub(crate) struct DisjointParts(pub(crate) *mut f32);
+
+impl DisjointParts {
+    /// The pointer to value `i` of the output (a method, so that a closure captures the whole
+    /// `Sync` wrapper rather than its raw pointer field).
+    ///
+    /// # Safety
+    /// `i` within the output.
+    pub(crate) unsafe fn at(&self, i: usize) -> *mut f32 {
+        // SAFETY: the caller keeps `i` within the output.
+        unsafe { self.0.add(i) }
+    }
+}
+
+// SAFETY: the pointer is only written through by the tasks of one op's split, each at its own
+// part of the output, while that op holds the output's mutable borrow and reads none of it.
+unsafe impl Sync for DisjointParts {}
 
 #[cfg(test)]
 mod tests {

@@ -10,7 +10,7 @@ use super::{
     BSource, Bias, FILL_PANELS, FillPanels, Finish, KC, MR, NC_PANELS, NR, Operands, TileBias,
     TileFinish, pack, panels, tier,
 };
-use crate::pool::{as_task, in_task, on_pool, on_threads, threads, worth_threads};
+use crate::pool::{DisjointParts, as_task, in_task, on_pool, on_threads, threads, worth_threads};
 
 /// [`super::product`]'s blocks, B's filled into `scratch` where it is filled.
 ///
@@ -166,7 +166,9 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>, per_task:
     if c.len() < ops.c_len() {
         return false;
     }
-    let shared = DisjointColumns(c.as_mut_ptr());
+    // Each task copies its block into place through the shared pointer, without a lock (under
+    // one, the tasks' copies ran one after the other).
+    let shared = DisjointParts(c.as_mut_ptr());
     let task = |t: usize| -> bool {
         let js = t * per_task..((t + 1) * per_task).min(n_panels);
         let col0 = js.start * NR;
@@ -213,27 +215,6 @@ fn column_split(ops: &Operands<'_>, c: &mut [f32], finish: Finish<'_>, per_task:
     };
     on_pool(n_panels.div_ceil(per_task), task)
 }
-
-/// C's first value, shared by the tasks of [`column_split`], each of which writes its own
-/// columns only (so each copies its block into place without a lock: under one, the tasks'
-/// copies ran one after the other).
-struct DisjointColumns(*mut f32);
-
-impl DisjointColumns {
-    /// The pointer to value `i` of C (a method, so that a closure captures the whole `Sync`
-    /// wrapper rather than its raw pointer field).
-    ///
-    /// # Safety
-    /// `i` within C.
-    unsafe fn at(&self, i: usize) -> *mut f32 {
-        // SAFETY: the caller keeps `i` within C.
-        unsafe { self.0.add(i) }
-    }
-}
-
-// SAFETY: the pointer is only written through by `column_split`'s tasks, each at its own
-// columns of C, while `column_split` holds C's mutable borrow.
-unsafe impl Sync for DisjointColumns {}
 
 /// One block of the product: B panels `js` over depth rows `pc..pc + kc`, into a C whose first
 /// column is that of panel `c_first`.

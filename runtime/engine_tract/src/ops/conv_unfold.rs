@@ -65,10 +65,8 @@ impl Eq for UnfoldConv {}
 
 impl Op for UnfoldConv {
     fn info(&self) -> TractResult<Vec<String>> {
-        let [c, _, _] = self.unfold.input;
-        let [kh, kw] = self.unfold.kernel;
         let [oh, ow] = self.unfold.output;
-        let (m, k, n) = (self.out_channels, c * kh * kw, oh * ow);
+        let (m, k, n) = (self.out_channels, self.unfold.depth(), oh * ow);
         Ok(vec![format!("Mult: m:{m} k:{k} n:{n} with [native]")])
     }
 
@@ -84,14 +82,13 @@ impl UnfoldConv {
     #[must_use]
     pub fn new(unfold: Unfold, batch_axis: bool, weights: &[f32], bias: Vec<f32>) -> Self {
         let out_channels = bias.len();
-        let [c, _, _] = unfold.input;
-        let [kh, kw] = unfold.kernel;
+        let k = unfold.depth();
         Self {
             unfold,
             out_channels,
             batch_axis,
             epilogue: Epilogue::default(),
-            weights: Arc::new(PackedA::from_row_major(weights, out_channels, c * kh * kw)),
+            weights: Arc::new(PackedA::from_row_major(weights, out_channels, k)),
             bias: Arc::new(bias),
         }
     }
@@ -125,8 +122,6 @@ impl EvalOp for UnfoldConv {
         let out_shape = self.output_shape();
         let shortcut = self.epilogue.shortcut(&inputs, &out_shape)?;
         let x = &inputs[0];
-        let [c_n, _, _] = self.unfold.input;
-        let [kh, kw] = self.unfold.kernel;
         let [oh, ow] = self.unfold.output;
         ensure!(
             x.shape() == &*self.input_shape(),
@@ -147,7 +142,7 @@ impl EvalOp for UnfoldConv {
             b: gemm::BSource::Fill(&fill),
             m: co,
             n: oh * ow,
-            k: c_n * kh * kw,
+            k: self.unfold.depth(),
             ldc: oh * ow,
         };
         let finish = self
@@ -167,10 +162,8 @@ impl TypedOp for UnfoldConv {
     }
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
-        let [c, _, _] = self.unfold.input;
-        let [kh, kw] = self.unfold.kernel;
         let [oh, ow] = self.unfold.output;
-        let fma = self.out_channels * c * kh * kw * oh * ow;
+        let fma = self.out_channels * self.unfold.depth() * oh * ow;
         Ok(tvec!((Cost::FMA(f32::datum_type()), fma.to_dim())))
     }
 

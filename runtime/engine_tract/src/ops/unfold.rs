@@ -28,6 +28,14 @@ pub struct Unfold {
 }
 
 impl Unfold {
+    /// Rows of the patch matrix (input channels times taps): a convolution's summed axis.
+    #[must_use]
+    pub fn depth(&self) -> usize {
+        let [c, _, _] = self.input;
+        let [kh, kw] = self.kernel;
+        c * kh * kw
+    }
+
     /// The windows of a 2-D `spec` over a `[c, h, w]` input (a convolution's or a pooling's);
     /// `None` for another rank or an empty output.
     pub fn of_pool(spec: &PoolSpec, [c, h, w]: [usize; 3]) -> Option<Self> {

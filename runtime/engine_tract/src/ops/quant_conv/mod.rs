@@ -94,7 +94,7 @@ impl QuantConv {
         tier: IntTier,
     ) -> TractResult<Self> {
         let m = bias.len();
-        let k = depth(&unfold);
+        let k = unfold.depth();
         ensure!(
             k > 0 && w.len() == m * k,
             "QuantConv: {} weights for {m} channels of depth {k}",
@@ -102,7 +102,7 @@ impl QuantConv {
         );
         let quads = quad_unfold(&unfold);
         let w = quad_order(&unfold, w, m);
-        let (weights, w_scales) = QRows::quantise(&w, m, depth(&quads) * 4)?;
+        let (weights, w_scales) = QRows::quantise(&w, m, quads.depth() * 4)?;
         let a_scale = quantize::scale_for(abs_max);
         Ok(Self {
             unfold,
@@ -146,7 +146,7 @@ impl QuantConv {
         residual: Option<&[f32]>,
         scratch: &mut BlockScratch,
     ) -> Result<(), QProductError> {
-        let groups = depth(&self.quads);
+        let groups = self.quads.depth();
         let panels = cols.div_ceil(qgemm::QNR);
         let width = panels * qgemm::QNR;
         let m = self.bias.len();
@@ -175,14 +175,6 @@ impl QuantConv {
         let local = &mut local[..m * cols];
         qgemm::channel_product(self.tier, &self.weights, lines, cols, finish, local, cols)
     }
-}
-
-/// Input channels times taps: the f32 convolution's summed axis (of [`QuantConv::quads`]: the
-/// product's groups of four).
-fn depth(unfold: &Unfold) -> usize {
-    let [c, _, _] = unfold.input;
-    let [kh, kw] = unfold.kernel;
-    c * kh * kw
 }
 
 /// A task's buffers, kept per thread between runs (they only grow, so a step allocates here
@@ -218,33 +210,13 @@ std::thread_local! {
     static BLOCK: std::cell::RefCell<BlockScratch> = std::cell::RefCell::new(BlockScratch::default());
 }
 
-/// The output, shared by the tasks, each of which writes its own pixels (columns) of every
-/// channel only.
-struct DisjointPixels(*mut f32);
-
-impl DisjointPixels {
-    /// The pointer to value `i` (a method, so that a closure captures the whole `Sync`
-    /// wrapper rather than its raw pointer field).
-    ///
-    /// # Safety
-    /// `i` within the output.
-    unsafe fn at(&self, i: usize) -> *mut f32 {
-        // SAFETY: the caller keeps `i` within the output.
-        unsafe { self.0.add(i) }
-    }
-}
-
-// SAFETY: written only by `eval`'s tasks, each at its own pixels, while `eval` holds the
-// output's mutable borrow.
-unsafe impl Sync for DisjointPixels {}
-
 impl Op for QuantConv {
     fn info(&self) -> TractResult<Vec<String>> {
         let [oh, ow] = self.unfold.output;
         Ok(vec![format!(
             "Mult: m:{} k:{} n:{} int8 on {}",
             self.bias.len(),
-            depth(&self.unfold),
+            self.unfold.depth(),
             oh * ow,
             self.tier
         )])
@@ -277,8 +249,8 @@ impl EvalOp for QuantConv {
         let mut po = out.try_as_plain_ram_mut()?;
         let c = po.as_slice_mut::<f32>()?;
         ensure!(c.len() == m * n, "QuantConv output of {} values", c.len());
-        let shared = DisjointPixels(c.as_mut_ptr());
-        let panel_bytes = depth(&self.quads) * qgemm::pack::LINE;
+        let shared = pool::DisjointParts(c.as_mut_ptr());
+        let panel_bytes = self.quads.depth() * qgemm::pack::LINE;
         let block_pixels = (BLOCK_BYTES / panel_bytes.max(1)).clamp(1, BLOCK_PANELS) * qgemm::QNR;
         let blocks = n.div_ceil(block_pixels);
         // The map taken out of its thread-local for the run and put back after, so that no
@@ -318,7 +290,7 @@ impl EvalOp for QuantConv {
                 true
             })
         };
-        let done = if pool::worth_threads(m * depth(&self.unfold) * n) && !pool::in_task() {
+        let done = if pool::worth_threads(m * self.unfold.depth() * n) && !pool::in_task() {
             pool::on_pool(blocks, task)
         } else {
             (0..blocks).all(task)
@@ -342,7 +314,7 @@ impl TypedOp for QuantConv {
 
     fn cost(&self, _inputs: &[&TypedFact]) -> TractResult<TVec<(Cost, TDim)>> {
         let [oh, ow] = self.unfold.output;
-        let macs = self.bias.len() * depth(&self.unfold) * oh * ow;
+        let macs = self.bias.len() * self.unfold.depth() * oh * ow;
         Ok(tvec!((Cost::FMA(i8::datum_type()), macs.to_dim())))
     }
 
