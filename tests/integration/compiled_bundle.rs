@@ -433,12 +433,14 @@ const F16_MAPS: MapBounds = MapBounds {
     map_drop_points: 1.0,
 };
 
-/// int8, measured 2026-12-02: mean Chamfer 0.222 m (max 0.61 m) over 384 kept of 400 elements,
-/// 11 changed class and 5 left the top-k (4%), mAP +1.55 points. Outside the product's line
-/// (0.1 m), so int8 is never the default; bounded at 1.5 times the measured Chamfer.
+/// int8, measured 2026-12-07 (the reference points kept f32): mean Chamfer 0.188 m (max 0.50 m)
+/// over 391 kept of 400 elements, 6 changed class and 3 left the top-k (2.25%), mAP -0.20
+/// points (2026-12-02, the reference points int8: 0.222 m, 4%, +1.55). Outside the product's
+/// line (0.1 m), so int8 is never the default; bounded at 1.5 times the measured Chamfer and
+/// twice the share.
 const INT8_MAPS: MapBounds = MapBounds {
-    mean_chamfer_m: 0.33,
-    changed_share: 0.12,
+    mean_chamfer_m: 0.28,
+    changed_share: 0.045,
     map_drop_points: 1.0,
 };
 

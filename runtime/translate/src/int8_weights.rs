@@ -17,9 +17,12 @@
 //! `CONST_FOLD_MEM_BUDGET`): larger ones (`nano`'s) stay int8 in RAM and are widened every step,
 //! less memory for a slower step (docs/bundles.md, "Precision").
 //!
-//! What stays f32, and why: biases, norms' gains and every tensor of fewer than
-//! [`MIN_INT8_ELEMENTS`] elements or of rank 1 (a few kB in all, and the first to move a
-//! result when rounded); all activations.
+//! What stays f32, and why: every tensor of fewer than [`MIN_INT8_ELEMENTS`] elements, of one
+//! axis longer than 1 (biases and norms' gains, which tract's rewrites may have reshaped to
+//! `[1, C]`: one scale for all their channels), or with fewer than [`MIN_CHANNEL_ELEMENTS`]
+//! values per output channel (the reference points, `[N, 2]`: one scale per point would round a
+//! coordinate by up to 1/254 of the point's larger one, 0.035 m of the `test` model's mean
+//! Chamfer deviation, docs/int8.md); all activations. A few kB in all.
 
 use std::collections::HashMap;
 
@@ -32,6 +35,9 @@ use tract_nnef::tract_core::ops::konst::Const;
 
 /// Elements at which a constant of rank 2 or more is stored as int8.
 pub const MIN_INT8_ELEMENTS: usize = 64;
+
+/// Values per output channel (the slice one scale covers) at which a constant is stored as int8.
+pub const MIN_CHANNEL_ELEMENTS: usize = 16;
 
 /// Largest magnitude of a stored weight: symmetric int8, -127..=127 (-128 unused, so a
 /// channel's scale maps its largest weight exactly).
@@ -100,17 +106,28 @@ fn append(tar: &mut tar::Builder<Vec<u8>>, path: &str, data: &[u8]) -> TractResu
     Ok(())
 }
 
-/// Whether a constant is a weight stored as int8.
-fn is_int8_weight(value: &Tensor) -> bool {
+/// Whether a constant is a weight that may be stored as int8, before its channel axis is known.
+fn is_int8_candidate(value: &Tensor) -> bool {
     value.datum_type() == f32::datum_type()
-        && value.rank() >= 2
         && value.len() >= MIN_INT8_ELEMENTS
+        && value.shape().iter().filter(|&&d| d > 1).count() >= 2
         && value.is_plain_ram()
 }
 
-/// Output-channel axis of each weight constant, by node name (the label the NNEF writer gives
-/// its tensor): the output-feature axis of a matmul operand, O of an OIHW kernel, else axis 0.
-/// Any axis gives a correct widening; this one gives each output channel its own range.
+/// Whether a candidate with output channels along `axis` is stored as int8: enough values share
+/// each channel's scale (see the module documentation).
+fn is_int8_weight(value: &Tensor, axis: usize) -> bool {
+    is_int8_candidate(value)
+        && value
+            .shape()
+            .get(axis)
+            .is_some_and(|&c| c > 0 && value.len() / c >= MIN_CHANNEL_ELEMENTS)
+}
+
+/// Output-channel axis of each constant stored as int8, by node name (the label the NNEF writer
+/// gives its tensor): the output-feature axis of a matmul operand, O of an OIHW kernel, else
+/// axis 0. Any axis gives a correct widening; this one gives each output channel its own range.
+/// A constant absent from the map stays f32.
 fn channel_axes(model: &TypedModel) -> HashMap<String, usize> {
     let mut axes = HashMap::new();
     for node in &model.nodes {
@@ -118,7 +135,7 @@ fn channel_axes(model: &TypedModel) -> HashMap<String, usize> {
             continue;
         };
         let rank = konst.val().rank();
-        if !is_int8_weight(konst.val()) {
+        if !is_int8_candidate(konst.val()) {
             continue;
         }
         let mut axis = 0;
@@ -140,7 +157,9 @@ fn channel_axes(model: &TypedModel) -> HashMap<String, usize> {
                 axis = rank - 1;
             }
         }
-        axes.insert(node.name.clone(), axis);
+        if is_int8_weight(konst.val(), axis) {
+            axes.insert(node.name.clone(), axis);
+        }
     }
     axes
 }
@@ -171,18 +190,18 @@ fn store_weights_as_int8(
     let mut out: Vec<Assignment> = Vec::with_capacity(body.len());
     for a in body {
         let label = variable_label(&a.right).map(str::to_owned);
+        let axis = label.as_ref().and_then(|l| axes.get(l)).copied();
         let weight = label
             .as_ref()
             .and_then(|l| proto.tensors.get(&Identifier(l.clone())))
-            .filter(|t| is_int8_weight(t))
+            .filter(|t| axis.is_some_and(|axis| is_int8_weight(t, axis)))
             .cloned();
-        let (Some(label), Some(weight), tract_nnef::ast::LValue::Identifier(id)) =
-            (label, weight, &a.left)
+        let (Some(label), Some(weight), Some(axis), tract_nnef::ast::LValue::Identifier(id)) =
+            (label, weight, axis, &a.left)
         else {
             out.push(a);
             continue;
         };
-        let axis = axes.get(&label).copied().unwrap_or(0);
         let (q, scale) =
             quantize_per_channel(&weight, axis).with_context(|| format!("weight {label}"))?;
         let scale_label = format!("{label}_scale");
@@ -341,6 +360,28 @@ mod tests {
         let model = model_adding(tensor1(&[0.5f32; COLS * 2]))?;
         let (_, stored) = write_tar(&tract_nnef::nnef(), &model)?;
         assert_eq!(stored, Int8Stored::default());
+        Ok(())
+    }
+
+    /// A gain reshaped to `[1, C]` (one scale would cover every channel) and a table of points
+    /// `[N, 2]` (two values a scale: one coordinate rounded by the other's magnitude) stay f32,
+    /// as every value of them reads back bit for bit; `[N, 16]` is stored as int8.
+    #[test]
+    fn row_vectors_and_point_tables_stay_f32() -> TractResult<()> {
+        let values: Vec<f32> = (0..COLS * 2).map(|i| 0.37 + i as f32 * 1e-3).collect();
+        for shape in [[1, COLS * 2], [COLS, 2]] {
+            let w = Tensor::from_shape(&shape, &values)?;
+            let (tar, stored) = write_tar(&tract_nnef::nnef(), &model_adding(w.clone())?)?;
+            assert_eq!(stored, Int8Stored::default(), "{shape:?}");
+            let back = tract_nnef::nnef().model_for_read(&mut tar.as_slice())?;
+            let plan = back.into_optimized()?.into_runnable()?;
+            let out = plan.run(tvec![Tensor::zero::<f32>(&shape)?.into_tvalue()])?;
+            let got = out[0].try_as_plain_ram()?.as_slice::<f32>()?;
+            assert_eq!(got, values.as_slice(), "{shape:?}");
+        }
+        let w = Tensor::from_shape(&[COLS * 2 / 16, 16], &values)?;
+        let (_, stored) = write_tar(&tract_nnef::nnef(), &model_adding(w)?)?;
+        assert_eq!(stored.tensors, 1);
         Ok(())
     }
 }
