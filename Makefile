@@ -3,15 +3,15 @@
 #               and out/demo/drive.mcap (open it in Foxglove)
 #   make test   the whole test suite (Rust and Python, the host and the ECU targets under
 #               emulation); .ci/run calls it
-# Commands a person runs, never CI: make train (the trained default model), make fuzz (the
-# libFuzzer campaign), make fuzz-parsers (1.8M generated inputs).
+# Commands a person runs, never CI: make train (the trained default model), make qat (its int8
+# fine-tuning), make fuzz (the libFuzzer campaign), make fuzz-parsers (1.8M generated inputs).
 # Everything they need is installed by the targets themselves.
 
 PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-tiers test-python test-paper test-c lint nostd venv train fuzz fuzz-ci \
+.PHONY: demo test test-rust test-tiers test-python test-paper test-c lint nostd venv train qat fuzz fuzz-ci \
   fuzz-parsers bench-peers \
   cross-toolchain test-aarch64 test-baremetal test-targets insn-counts
 
@@ -216,6 +216,28 @@ train: venv
 	cp $(RUNS)/sat/weights.safetensors models/weights/test_sat.safetensors
 	cp $(RUNS)/camera/weights.safetensors models/weights/test_camera.safetensors
 	$(PY) -m satmap_ref.golden --take-input $(DATA)
+
+# Quantisation-aware fine-tuning of the trained `test` weights for int8 (never run in CI; ~10 min
+# on this 2-core machine; docs/int8.md, "Quantisation-aware fine-tuning"): the training split's
+# worlds 1000..1039 (24 frames each), 400 updates distilling the f32 model into its int8-rounded
+# self, the weights snapped to their int8 grid (committed: models/weights/test_sat_qat.safetensors),
+# then their W8A32 and W8A8 bundles (calibrated as the committed one). Resumable.
+QAT_DATA ?= out/qat-data
+QAT_RUN ?= out/qat-run
+QAT_FLAGS ?= --steps 400 --batch 4 --lr 1e-4 --warmup 20 --threads 2
+qat: venv
+	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
+	test -f $(QAT_DATA)/index.json || target/debug/satmap-sim export-dataset --out $(QAT_DATA) \
+	  --train-seeds 1000..1040 --val-seeds 2000..2001 --test-seeds 3000..3001 --quiet
+	cd models && .venv/bin/python -m satmap_ref.train.qat --data ../$(QAT_DATA) \
+	  --weights weights/test_sat.safetensors --out ../$(QAT_RUN) $(QAT_FLAGS)
+	cp $(QAT_RUN)/weights.safetensors models/weights/test_sat_qat.safetensors
+	cd models && .venv/bin/python -m satmap_ref.export --config test --out build/test-qat \
+	  --weights weights/test_sat_qat.safetensors
+	target/debug/satmap-sim compile --bundle models/build/test-qat --precision int8 \
+	  --out models/build/test-qat-int8.satmap
+	target/debug/satmap-sim compile --bundle models/build/test-qat-int8.satmap --precision int8 \
+	  --calibrate 1000..1004 --calibration-frames 8 --out models/build/test-qat-w8a8.satmap
 
 # The ECU's processors, under emulation (docs/targets.md; targets/README.md). The toolchain comes
 # from Debian's packages only: a trixie chroot with Rust 1.96, aarch64's std, the std sources

@@ -47,6 +47,11 @@ pub struct Args {
     /// magnitude) or `percentile-P` (the magnitude below which P% of them lie).
     #[arg(long, default_value = "abs-max")]
     pub calibration_method: RangeMethod,
+    /// With `--calibrate`: keep every layer whose `stage/layer` name contains PATTERN in f32
+    /// arithmetic (its weights stay int8, widened at load; repeatable): mixed precision for the
+    /// layers whose activations' rounding costs the most (docs/int8.md, "Sensitivity").
+    #[arg(long = "float-layer", value_name = "PATTERN")]
+    pub float_layers: Vec<String>,
 }
 
 /// The calibration frames a compile may use: `precision` int8, `seeds` inside the training
@@ -117,6 +122,31 @@ pub fn calibrate(
     })
 }
 
+/// `calibration` without the layers whose `stage/layer` contains one of `patterns`: they have
+/// no range, so they stay f32 (W8A32).
+///
+/// # Errors
+/// A pattern that matches no layer (a typo would otherwise keep everything in int8 silently).
+pub fn keep_float(
+    mut calibration: Int8Calibration,
+    patterns: &[String],
+) -> Result<Int8Calibration> {
+    let name = |r: &ActivationRange| format!("{}/{}", r.stage, r.layer);
+    for p in patterns {
+        if !calibration
+            .layers
+            .iter()
+            .any(|r| name(r).contains(p.as_str()))
+        {
+            bail!("--float-layer {p:?} matches no calibrated layer (names are `stage/layer`)");
+        }
+    }
+    calibration
+        .layers
+        .retain(|r| !patterns.iter().any(|p| name(r).contains(p.as_str())));
+    Ok(calibration)
+}
+
 /// Calibrate the compiled int8 bundle at `from` over `seeds` as `args` say, and write it with its
 /// ranges to `to` (which may be `from`).
 ///
@@ -130,6 +160,7 @@ fn calibrate_into(from: &Path, to: &Path, seeds: SeedRange, args: &Args) -> Resu
         args.calibration_frames,
         args.calibration_method,
     )?;
+    let calibration = keep_float(calibration, &args.float_layers)?;
     let bytes = with_calibration(&Bundle::open(from)?, &calibration)?;
     std::fs::write(to, &bytes).with_context(|| format!("writing {}", to.display()))?;
     println!(
@@ -152,6 +183,8 @@ fn calibrate_into(from: &Path, to: &Path, seeds: SeedRange, args: &Args) -> Resu
 pub fn run(args: &Args) -> Result<()> {
     if let Some(seeds) = args.calibrate {
         check_calibration(args.precision, seeds, args.calibration_frames)?;
+    } else if !args.float_layers.is_empty() {
+        bail!("--float-layer takes --calibrate (without ranges every layer is f32 arithmetic)");
     }
     let layout = read_layout(args.layout.as_deref())?;
     let source = Bundle::open(&args.bundle)?;
@@ -209,4 +242,49 @@ pub fn run(args: &Args) -> Result<()> {
         "load + optimise: {compiled_ms:.0} ms from the compiled bundle, {onnx_ms:.0} ms from ONNX"
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table() -> Int8Calibration {
+        let layer = |stage: &str, layer: &str| ActivationRange {
+            stage: stage.into(),
+            layer: layer.into(),
+            abs_max: 1.5,
+        };
+        Int8Calibration {
+            method: "abs-max".into(),
+            frames: "test".into(),
+            layers: vec![
+                layer("image_encoder", "conv1"),
+                layer("map_decoder", "__fuser_fuser_0_Conv_conv"),
+                layer("map_decoder", "__reg_branches_0_Gemm_ab"),
+            ],
+        }
+    }
+
+    /// `--float-layer` drops the layers it names (by stage, by part of a name), keeps the rest
+    /// and their ranges, and refuses a pattern that names nothing.
+    #[test]
+    fn float_layers_leave_the_table_and_a_pattern_naming_nothing_is_refused() {
+        let names = |c: &Int8Calibration| {
+            c.layers
+                .iter()
+                .map(|r| format!("{}/{}", r.stage, r.layer))
+                .collect::<Vec<_>>()
+        };
+        let kept = keep_float(table(), &["map_decoder/".into()]).unwrap();
+        assert_eq!(names(&kept), ["image_encoder/conv1"]);
+        assert_eq!(kept.layers[0].abs_max, 1.5);
+        let kept = keep_float(table(), &["reg_branches".into(), "conv1".into()]).unwrap();
+        assert_eq!(names(&kept), ["map_decoder/__fuser_fuser_0_Conv_conv"]);
+        assert_eq!(keep_float(table(), &[]).unwrap(), table());
+        let err = keep_float(table(), &["bev_query/".into()]).unwrap_err();
+        assert!(
+            err.to_string().contains("matches no calibrated layer"),
+            "{err}"
+        );
+    }
 }
