@@ -121,3 +121,52 @@ def test_qat_resumes_to_the_same_weights_on_the_grid(tmp_path):
     conv = wa.img_backbone.conv1.weight.detach()
     assert torch.equal(compile_rounding(conv), conv)
     assert not torch.equal(conv, w0.img_backbone.conv1.weight.detach())  # it trained
+
+
+def test_activation_quant_records_ranges_then_rounds_inputs_to_them():
+    torch.manual_seed(0)
+    model = nn.Sequential(nn.Linear(16, 32), nn.ReLU(), nn.Linear(32, 4))
+    names = fake_quant.attach(model)
+    assert names == ["0.weight", "2.weight"]  # [4, 32]: 128 elements, 32 a channel
+    acts = fake_quant.ActivationQuant(model, names)
+    x = torch.randn(8, 16)
+    ref = model(x)  # observing: nothing rounded yet
+    assert set(acts.abs_max) == {"0", "2"} and acts.abs_max["0"] == float(x.abs().amax())
+    seen = {}
+    model[2].register_forward_pre_hook(lambda m, a: seen.update(n=len(seen) + 1))
+    acts.freeze()
+    with torch.enable_grad():
+        xg = (x * 2).requires_grad_(True)  # half of it outside the recorded range
+        out = model(xg)
+        out.sum().backward()
+    step = acts.abs_max["0"] / 127
+    assert not torch.equal(model(x), ref)  # the inputs are rounded now
+    # The first layer's input was clipped to its range: no gradient where |x| rounds beyond it
+    # (past half a step over the range).
+    outside = (xg.detach().abs() > acts.abs_max["0"] * 127.5 / 127)
+    assert outside.any() and torch.all(xg.grad[outside] == 0)
+    assert step > 0 and seen
+    # A checkpoint's ranges replace the recorded ones.
+    acts.freeze({"0": 1.0, "2": 2.0})
+    assert acts.abs_max == {"0": 1.0, "2": 2.0}
+
+
+def test_qat_with_activations_keeps_its_ranges_across_a_resume(tmp_path):
+    root = write_fake_dataset(tmp_path / "ds", {"train": [1000], "val": [], "test": [2]}, 2)
+    teacher = tmp_path / "teacher.safetensors"
+    save_weights(build_model(CFG, 3), teacher)
+    common = dict(data=root, weights=teacher, batch=1, warmup=1, threads=1, activations=True)
+    with torch.enable_grad():
+        qat(QatArgs(out=tmp_path / "a", steps=1, **common))
+        ranges = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=False)[
+            "activation_abs_max"]
+        qat(QatArgs(out=tmp_path / "a", steps=2, **common))
+        qat(QatArgs(out=tmp_path / "b", steps=2, **common))
+    assert len(ranges) > 50 and all(v > 0 for v in ranges.values())
+    after = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=False)
+    assert after["activation_abs_max"] == ranges
+    wa, wb = build_model(CFG, 5), build_model(CFG, 6)
+    load_weights(wa, tmp_path / "a" / "weights.safetensors")
+    load_weights(wb, tmp_path / "b" / "weights.safetensors")
+    for (k, va), vb in zip(wa.state_dict().items(), wb.state_dict().values()):
+        assert torch.equal(va, vb), k

@@ -94,3 +94,43 @@ def snap(model: nn.Module) -> int:
                 parametrize.remove_parametrizations(mod, p_name, leave_parametrized=True)
                 snapped += 1
     return snapped
+
+
+class ActivationQuant:
+    """Per-tensor symmetric fake-quantisation of the inputs of the linear layers and
+    convolutions whose weights are fake-quantised: what `compile --calibrate` then computes in
+    int8 (abs-max over training frames, `abs_max / 127` a step). Forward pre-hooks: while
+    `observing`, each records the largest `|x|` its module's input reached; afterwards each
+    rounds its input to that range's grid (the gradient straight through inside the range, zero
+    outside). MultiheadAttention's input projections are plain matmuls inside its forward and
+    are not covered (their sensitivity is among the smallest, docs/int8.md)."""
+
+    def __init__(self, model: nn.Module, weight_names: list[str]):
+        wanted = {n.rsplit(".", 1)[0] for n in weight_names if n.endswith(".weight")}
+        self.modules = {name: mod for name, mod in model.named_modules()
+                        if name in wanted and isinstance(mod, (nn.Linear, nn.Conv2d))}
+        self.abs_max: dict[str, float] = {}
+        self.observing = True
+        for name, mod in self.modules.items():
+            mod.register_forward_pre_hook(self._hook(name))
+
+    def _hook(self, name: str):
+        def hook(_mod: nn.Module, args: tuple) -> tuple | None:
+            x = args[0]
+            if self.observing:
+                m = float(x.detach().abs().amax())
+                self.abs_max[name] = max(self.abs_max.get(name, 0.0), m)
+                return None
+            m = self.abs_max.get(name, 0.0)
+            if m <= 0.0:
+                return None
+            q = torch.fake_quantize_per_tensor_affine(x, m / Q_MAX, 0, -Q_MAX, Q_MAX)
+            return (q, *args[1:])
+        return hook
+
+    def freeze(self, abs_max: dict[str, float] | None = None) -> None:
+        """Stop observing: quantise from now on with the recorded ranges (or `abs_max`, a
+        checkpoint's)."""
+        if abs_max is not None:
+            self.abs_max = dict(abs_max)
+        self.observing = False

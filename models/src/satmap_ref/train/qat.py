@@ -55,6 +55,9 @@ class QatArgs:
     time_limit_min: float | None = None
     ckpt_every: int = 50
     clip_norm: float = 35.0
+    activations: bool = False
+    calibration_frames: int = 8
+    calibration_seeds: tuple[int, int] = (1000, 1005)
 
 
 def distill_loss(student: tuple[torch.Tensor, torch.Tensor],
@@ -72,6 +75,23 @@ def distill_loss(student: tuple[torch.Tensor, torch.Tensor],
     logits = (s_logits - t_logits).abs().mean()
     return pts_m + logits, {"points_l1_m": float(pts_m.detach()),
                             "logits_l1": float(logits.detach())}
+
+
+def calibrate_activations(model: torch.nn.Module, acts: fake_quant.ActivationQuant,
+                          ds: SatMapDataset, lut: Any, args: QatArgs) -> None:
+    """Record the activation ranges over the worlds `compile --calibrate 1000..1004` drives
+    (the dataset's first `calibration_frames` frames of each training world in
+    `calibration_seeds`), the weights already fake-quantised, then freeze them."""
+    lo, hi = args.calibration_seeds
+    refs = [r for r in ds.frames("train")
+            if lo <= r.seed < hi and r.index < args.calibration_frames]
+    if not refs:
+        raise ValueError(f"no training frames of worlds {lo}..{hi} in {args.data}")
+    model.eval()
+    with torch.no_grad():
+        for r in refs:
+            forward_exported(model, lut, ds.load(r), "sat")
+    acts.freeze()
 
 
 def qat(args: QatArgs) -> dict[str, Any]:
@@ -93,6 +113,7 @@ def qat(args: QatArgs) -> dict[str, Any]:
     for p in teacher.parameters():
         p.requires_grad_(False)
     quantised = fake_quant.attach(model)
+    acts = fake_quant.ActivationQuant(model, quantised) if args.activations else None
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.AdamW(params, lr=args.lr, weight_decay=0.0)
     sched = torch.optim.lr_scheduler.LambdaLR(
@@ -109,16 +130,22 @@ def qat(args: QatArgs) -> dict[str, Any]:
         step, elapsed = int(ck["step"]), float(ck["elapsed_s"])
         for g, base in zip(opt.param_groups, sched.base_lrs):
             g["lr"] = base * lr_factor(step, args.steps, args.warmup)
+        if acts is not None:
+            acts.freeze(ck["activation_abs_max"])
+    if acts is not None and acts.observing:
+        calibrate_activations(model, acts, ds, lut, args)
     (out / "run.json").write_text(json.dumps(
         {**{k: str(v) if isinstance(v, Path) else v for k, v in asdict(args).items()},
-         "config": cfg.name, "train_frames": len(frames), "fake_quantised": len(quantised)},
+         "config": cfg.name, "train_frames": len(frames), "fake_quantised": len(quantised),
+         "activation_ranges": None if acts is None else len(acts.abs_max)},
         indent=1) + "\n")
 
     def checkpoint() -> None:
         save_checkpoint(out / CHECKPOINT, {
             "kind": "qat", "step": step, "elapsed_s": elapsed, "config": cfg.name,
             "model": model.state_dict(), "optimizer": opt.state_dict(),
-            "scheduler": sched.state_dict(), "sampler": sampler.state_dict()})
+            "scheduler": sched.state_dict(), "sampler": sampler.state_dict(),
+            "activation_abs_max": None if acts is None else acts.abs_max})
 
     set_train_mode(model)
     limit_s = None if args.time_limit_min is None else 60.0 * args.time_limit_min
@@ -179,11 +206,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--time-limit-min", type=float, default=None,
                     help="checkpoint and stop after this many minutes")
     ap.add_argument("--ckpt-every", type=int, default=50, help="checkpoint every K updates")
+    ap.add_argument("--activations", action="store_true",
+                    help="also fake-quantise the layers' inputs (W8A8; ranges calibrated first)")
     a = ap.parse_args(argv)
     print(json.dumps(qat(QatArgs(
         data=a.data, weights=a.weights, out=a.out, steps=a.steps, batch=a.batch, lr=a.lr,
         warmup=a.warmup, seed=a.seed, threads=a.threads, time_limit_min=a.time_limit_min,
-        ckpt_every=a.ckpt_every))))
+        ckpt_every=a.ckpt_every, activations=a.activations))))
 
 
 if __name__ == "__main__":
