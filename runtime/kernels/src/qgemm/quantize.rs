@@ -123,6 +123,81 @@ fn activations_avx2(x: &[f32], rows: usize, k: usize, inv_scale: f32, out: &mut 
     activations_body(x, rows, k, inv_scale, out);
 }
 
+/// `x` (`[C, H, W]` f32, channel-first) quantised with `inv_scale` into four-channel values
+/// (`ceil(C / 4)` planes of `H x W`; value `(c4, y, x)` holds channels `4 * c4 .. 4 * c4 + 4` at
+/// the pixel, channel `4 * c4 + j` in byte `j`, zeros past `C`): the channel-first product's
+/// patches are gathered from this map (`channel_product`). Each byte is [`quantize`]'s. Returns
+/// `false` (nothing written) when `x` or `out` is shorter than the shape needs.
+#[must_use]
+pub fn quads(x: &[f32], shape: [usize; 3], inv_scale: f32, out: &mut [u32]) -> bool {
+    let [c, h, w] = shape;
+    if x.len() < c * h * w || out.len() < c.div_ceil(4) * h * w {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") {
+        // SAFETY: the features are present; the body only indexes checked slices.
+        unsafe { quads_avx512(x, shape, inv_scale, out) };
+        return true;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is present; the body only indexes checked slices.
+        unsafe { quads_avx2(x, shape, inv_scale, out) };
+        return true;
+    }
+    quads_body(x, shape, inv_scale, out);
+    true
+}
+
+/// The loop of [`quads`], inlined into each build. A whole group of four channels is one zipped
+/// pass over four equal slices (vectorised); only a ragged last group takes the per-value path.
+#[inline(always)]
+fn quads_body(x: &[f32], [c, h, w]: [usize; 3], inv_scale: f32, out: &mut [u32]) {
+    let plane = h * w;
+    let q = |v: f32| u32::from(quantize(v, inv_scale) as u8);
+    for (c4, dst) in out
+        .chunks_exact_mut(plane.max(1))
+        .take(c.div_ceil(4))
+        .enumerate()
+    {
+        if 4 * c4 + 4 <= c
+            && let Some(group) = x.get(4 * c4 * plane..(4 * c4 + 4) * plane)
+        {
+            let (a, rest) = group.split_at(plane);
+            let (b, rest) = rest.split_at(plane);
+            let (cc, d) = rest.split_at(plane);
+            for ((((v, &a), &b), &cc), &d) in dst.iter_mut().zip(a).zip(b).zip(cc).zip(d) {
+                *v = q(a) | q(b) << 8 | q(cc) << 16 | q(d) << 24;
+            }
+            continue;
+        }
+        let chan = |j: usize| -> Option<&[f32]> {
+            let ch = 4 * c4 + j;
+            (ch < c)
+                .then(|| x.get(ch * plane..(ch + 1) * plane))
+                .flatten()
+        };
+        let [a, b, cc, d] = [chan(0), chan(1), chan(2), chan(3)];
+        for (i, v) in dst.iter_mut().enumerate() {
+            let q = |p: Option<&[f32]>| p.and_then(|p| p.get(i)).map_or(0, |&x| q(x));
+            *v = q(a) | q(b) << 8 | q(cc) << 16 | q(d) << 24;
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+fn quads_avx512(x: &[f32], shape: [usize; 3], inv_scale: f32, out: &mut [u32]) {
+    quads_body(x, shape, inv_scale, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn quads_avx2(x: &[f32], shape: [usize; 3], inv_scale: f32, out: &mut [u32]) {
+    quads_body(x, shape, inv_scale, out);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,5 +266,39 @@ mod tests {
         assert_eq!(scale_for(f32::NAN), 1.0);
         assert_eq!(scale_for(f32::INFINITY), 1.0);
         assert_eq!(scale_for(127.0), 1.0);
+    }
+
+    /// Both paths (whole groups of four channels, a ragged last group) put each channel's
+    /// [`quantize`] byte at its place, zeros past `C`, for channel counts 1..=9, with NaN and
+    /// out-of-range values among them; short slices are refused with nothing written.
+    #[test]
+    fn quads_put_every_channel_in_its_byte() {
+        let (h, w) = (3, 5);
+        let plane = h * w;
+        for c in 1usize..=9 {
+            let mut x: Vec<f32> = (0..c * plane)
+                .map(|i| (i as f32 * 0.37).sin() * 2.5)
+                .collect();
+            x[0] = f32::NAN;
+            let inv_scale = 127.0 / 2.0;
+            let mut out = vec![u32::MAX; c.div_ceil(4) * plane];
+            assert!(quads(&x, [c, h, w], inv_scale, &mut out));
+            for (i, &v) in out.iter().enumerate() {
+                let (c4, p) = (i / plane, i % plane);
+                for (j, byte) in v.to_le_bytes().into_iter().enumerate() {
+                    let ch = 4 * c4 + j;
+                    let want = if ch < c {
+                        quantize(x[ch * plane + p], inv_scale) as u8
+                    } else {
+                        0
+                    };
+                    assert_eq!(byte, want, "c {c}, channel {ch}, pixel {p}");
+                }
+            }
+        }
+        let mut out = vec![7u32; plane];
+        assert!(!quads(&[0.0; 10], [4, h, w], 1.0, &mut out));
+        assert!(!quads(&[0.0; 60], [5, h, w], 1.0, &mut out));
+        assert!(out.iter().all(|&v| v == 7));
     }
 }

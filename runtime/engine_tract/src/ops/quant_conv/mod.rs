@@ -31,7 +31,7 @@ use crate::ops::unfold::{Unfold, with_batch};
 use crate::pool;
 
 mod quad_map;
-use quad_map::{quad_order, quad_unfold, quantise_quads};
+use quad_map::{quad_order, quad_unfold};
 
 /// Most panels of 16 output pixels a block (one task).
 const BLOCK_PANELS: usize = 16;
@@ -261,7 +261,14 @@ impl EvalOp for QuantConv {
         if map.len() < len {
             map.resize(len, 0);
         }
-        quantise_quads(xs, self.unfold.input, self.inv_scale, &mut map[..len]);
+        if !quantize::quads(xs, self.unfold.input, self.inv_scale, &mut map[..len]) {
+            MAP.set(map);
+            bail!(
+                "QuantConv input of {} values for {:?}",
+                xs.len(),
+                self.unfold.input
+            );
+        }
         let xq = &map[..len];
         // The first error of a task (a tier this CPU lacks, a mis-sized operand: bugs, never
         // input), returned as it is.
