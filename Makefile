@@ -138,10 +138,11 @@ $(PAPER_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)
 # models/src/satmap_ref/peers.py. PEERS_FLAGS=--rounds 1 for a quick look.
 # Each bundle also runs in its compiled NNEF form (`<bundle>.satmap`, the form the runtime ships;
 # the default's is committed, nano's and paper's are compiled here, paper against its layout).
-# int8 (`test`): ours on the committed W8A8 bundle against onnxruntime on the stages
-# `satmap_ref.ort_int8` quantises (quantize_static, QDQ) over the frames our calibration uses:
-# training-split worlds 1000..1004, 8 frames each (exported here; the one-drive validation and
-# test splits export-dataset insists on are not read).
+# int8 (`test`, `nano`): ours on the W8A8 bundle (`test`'s committed, `nano`'s compiled and
+# calibrated here) against onnxruntime on the stages `satmap_ref.ort_int8` quantises
+# (quantize_static, QDQ) over the frames our calibration uses: training-split worlds 1000..1004,
+# 8 frames each (exported here; the one-drive validation and test splits export-dataset insists
+# on are not read; `nano` takes `test`'s inputs, `paper` does not and has no int8 column).
 NANO_BUNDLE := models/build/nano
 CALIBRATION_FRAMES := models/build/calibration-frames
 PEERS_FLAGS ?= --rounds 3 --repeats 5
@@ -152,11 +153,18 @@ bench-peers: $(NANO_BUNDLE)/manifest.sha256 $(PAPER_BUNDLE)/manifest.sha256
 	  --layout layouts/paper.toml
 	target/debug/satmap-sim export-dataset --out $(CALIBRATION_FRAMES) --train-seeds 1000..1004 \
 	  --val-seeds 2000..2001 --test-seeds 3000..3001 --frames 8 --quiet
+	target/debug/satmap-sim compile --bundle $(NANO_BUNDLE) --precision int8 \
+	  --out $(NANO_BUNDLE)-int8.satmap
+	target/debug/satmap-sim compile --bundle $(NANO_BUNDLE)-int8.satmap --precision int8 \
+	  --calibrate 1000..1004 --calibration-frames 8 --out $(NANO_BUNDLE)-w8a8.satmap
 	cd models && .venv/bin/python -m satmap_ref.ort_int8 --bundle bundles/test \
 	  --data build/calibration-frames --out build/test-ort-int8
+	cd models && .venv/bin/python -m satmap_ref.ort_int8 --bundle build/nano \
+	  --data build/calibration-frames --out build/nano-ort-int8
 	cd models && .venv/bin/python -m satmap_ref.peers --sim ../target/debug/satmap-sim \
 	  --bundle test=bundles/test --bundle nano=build/nano --bundle paper=build/paper \
 	  --int8 test=bundles/test-w8a8.satmap:build/test-ort-int8 \
+	  --int8 nano=build/nano-w8a8.satmap:build/nano-ort-int8 \
 	  --threads 1 2 $(PEERS_FLAGS) --out ../docs/perf
 
 $(NANO_BUNDLE)/manifest.sha256: $(PY_VENV)/.installed $(SATMAP_PY_SOURCES)

@@ -30,3 +30,11 @@ def test_a_quantised_stage_is_qdq_and_close_to_f32(tmp_path):
     got = _run(dst, feeds)
     worst = float(np.abs(got - want).max())
     assert 0.0 < worst <= 0.1 * float(np.abs(want).max()), worst
+
+
+def test_nano_takes_test_frames_and_paper_does_not():
+    from satmap_ref.config import get_config
+    from satmap_ref.ort_int8 import same_inputs
+    test, nano, paper = (get_config(n) for n in ("test", "nano", "paper"))
+    assert same_inputs(test, nano) and same_inputs(test, test)
+    assert not same_inputs(test, paper)  # half-scale images, a finer satellite crop

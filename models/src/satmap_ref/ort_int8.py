@@ -10,7 +10,8 @@ calibration inputs are what the f32 pipeline feeds it on those frames (`StagedRu
 cameras' images for the image encoder, the recorded interface tensors for the others.
 
 The output folder holds the quantised stages beside the bundle's manifest and reference inputs,
-so `satmap_ref.peers`'s onnxruntime worker times it as it times the f32 folder.
+so `satmap_ref.peers`'s onnxruntime worker times it as it times the f32 folder. A config whose
+inputs are `test`'s (`nano`: the same cameras, crop and BEV range) calibrates on `test` frames.
 
     python -m satmap_ref.ort_int8 --bundle bundles/test --data DATASET --out build/test-ort-int8
 """
@@ -25,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .calibration import DEFAULT_CALIBRATION, lidar2img_all, load_calibration
-from .config import get_config
+from .config import SatMapConfig, get_config
 from .export import StagedRunner
 from .gkt import build_lut
 from .train.dataset import SatMapDataset
@@ -43,10 +44,21 @@ STAGE_INPUTS = {
 KEPT = ("manifest.toml", "reference.safetensors")
 
 
+def same_inputs(frames: SatMapConfig, bundle: SatMapConfig) -> bool:
+    """Whether frames exported for config `frames` are inputs of config `bundle`: the same
+    camera images, satellite crop and BEV range (`nano` takes `test`'s frames)."""
+    def key(c: SatMapConfig) -> tuple:
+        return (c.image_h, c.image_w, c.sat_h, c.sat_w, tuple(c.pc_range_m))
+    return key(frames) == key(bundle)
+
+
 def calibration_feeds(bundle: Path, data: Path) -> dict[str, list[dict[str, np.ndarray]]]:
-    """Every stage's input feeds over the training-split frames of the dataset `data`."""
+    """Every stage's input feeds over the training-split frames of the dataset `data`, through
+    the bundle's own config (its LUT and stages)."""
     ds = SatMapDataset(data)
-    cfg = ds.cfg
+    cfg = get_config(_bundle_config(bundle))
+    if not same_inputs(ds.cfg, cfg):
+        raise ValueError(f"{data} holds `{ds.cfg.name}` frames, not inputs of `{cfg.name}`")
     runner = StagedRunner(cfg, bundle)
     lut = build_lut(cfg, lidar2img_all(load_calibration(DEFAULT_CALIBRATION), cfg.image_scale))
     feeds: dict[str, list[dict[str, np.ndarray]]] = {"image_encoder": []}
@@ -112,10 +124,11 @@ def main(argv: list[str] | None = None) -> None:
                     help="u8: asymmetric unsigned (onnxruntime's x86 recommendation, the "
                          "default); s8: symmetric signed, as ours")
     a = ap.parse_args(argv)
-    cfg_name = SatMapDataset(a.data).cfg.name
-    bundle_cfg = get_config(_bundle_config(a.bundle)).name
-    if cfg_name != bundle_cfg:
-        sys.exit(f"{a.data} holds `{cfg_name}` frames, {a.bundle} is `{bundle_cfg}`")
+    frames_cfg = SatMapDataset(a.data).cfg
+    bundle_cfg = get_config(_bundle_config(a.bundle))
+    if not same_inputs(frames_cfg, bundle_cfg):
+        sys.exit(f"{a.data} holds `{frames_cfg.name}` frames, not inputs of {a.bundle} "
+                 f"(`{bundle_cfg.name}`)")
     quantise_bundle(a.bundle, a.data, a.out, a.activations,
                     log=lambda s: print(s, file=sys.stderr))
     print(f"wrote {a.out}")
