@@ -80,6 +80,22 @@ def lr_factor(step: int, total: int, warmup: int) -> float:
     return 0.5 * (1.0 + math.cos(math.pi * (step - w) / span))
 
 
+def restore(ck: dict[str, Any], model: nn.Module, opt: torch.optim.Optimizer,
+            sched: torch.optim.lr_scheduler.LambdaLR, sampler: ShardSampler, steps: int,
+            warmup: int) -> tuple[int, float]:
+    """The model, optimiser, schedule and sampler states of checkpoint `ck` loaded; returns
+    its (step, elapsed seconds). The learning rate follows this invocation's `steps` (a run may
+    be extended)."""
+    model.load_state_dict(ck["model"])
+    opt.load_state_dict(ck["optimizer"])
+    sched.load_state_dict(ck["scheduler"])
+    sampler.load_state_dict(ck["sampler"])
+    step, elapsed = int(ck["step"]), float(ck["elapsed_s"])
+    for g, base in zip(opt.param_groups, sched.base_lrs):
+        g["lr"] = base * lr_factor(step, steps, warmup)
+    return step, elapsed
+
+
 def train_step(model: SatMap, lut: LutTensors, batch: list[tuple[Sample, MapTargets]],
                mode: str, world: World = SINGLE,
                runner: DistributedDataParallel | None = None) -> dict[str, float]:
@@ -160,14 +176,7 @@ def _train(args: TrainArgs, world: World) -> dict[str, Any]:
         if trained_batch != args.batch * world.size:
             raise ValueError(f"{out / CHECKPOINT} was trained with a global batch of "
                              f"{trained_batch} frames; resume with --batch x ranks equal to it")
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["optimizer"])
-        sched.load_state_dict(ck["scheduler"])
-        sampler.load_state_dict(ck["sampler"])
-        step, elapsed = int(ck["step"]), float(ck["elapsed_s"])
-        # The schedule follows this invocation's --steps (a run may be extended).
-        for g, base in zip(opt.param_groups, sched.base_lrs):
-            g["lr"] = base * lr_factor(step, args.steps, args.warmup)
+        step, elapsed = restore(ck, model, opt, sched, sampler, args.steps, args.warmup)
     # Each rank its own random stream, a function of (seed, rank, step) only, so a run is
     # reproducible whatever world size it was resumed at (the model itself draws nothing at
     # train time: dropout is 0).

@@ -34,7 +34,7 @@ from . import fake_quant
 from .checkpoint import CHECKPOINT, WEIGHTS, load_checkpoint, save_checkpoint, save_weights
 from .dataset import SatMapDataset
 from .forward import forward_exported, load_lut, set_train_mode
-from .loop import LOG, lr_factor
+from .loop import LOG, lr_factor, restore
 from .sampler import ShardSampler
 from .targets import denormalize_pts
 
@@ -123,13 +123,7 @@ def qat(args: QatArgs) -> dict[str, Any]:
     if ck is not None:
         if ck.get("kind") != "qat" or ck["config"] != cfg.name:
             raise ValueError(f"{out / CHECKPOINT} is not a {cfg.name} QAT run")
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["optimizer"])
-        sched.load_state_dict(ck["scheduler"])
-        sampler.load_state_dict(ck["sampler"])
-        step, elapsed = int(ck["step"]), float(ck["elapsed_s"])
-        for g, base in zip(opt.param_groups, sched.base_lrs):
-            g["lr"] = base * lr_factor(step, args.steps, args.warmup)
+        step, elapsed = restore(ck, model, opt, sched, sampler, args.steps, args.warmup)
         if acts is not None:
             acts.freeze(ck["activation_abs_max"])
     if acts is not None and acts.observing:
