@@ -225,20 +225,22 @@ train: venv
 	cp $(RUNS)/camera/weights.safetensors models/weights/test_camera.safetensors
 	$(PY) -m satmap_ref.golden --take-input $(DATA)
 
-# Quantisation-aware fine-tuning of the trained `test` weights for int8 (never run in CI; ~10 min
-# on this 2-core machine; docs/int8.md, "Quantisation-aware fine-tuning"): the training split's
+# Quantisation-aware fine-tuning of the trained `test` weights for int8 (never run in CI; ~9 min
+# on this 2-core machine; docs/int8.md, "The error: ..."): the training split's
 # worlds 1000..1039 (24 frames each), 400 updates distilling the f32 model into its int8-rounded
 # self, the weights snapped to their int8 grid (committed: models/weights/test_sat_qat.safetensors),
-# then their W8A32 and W8A8 bundles (calibrated as the committed one). Resumable.
+# then their W8A32 and W8A8 bundles (calibrated as the committed one). Resumable: the export
+# skips finished drives, the fine-tuning continues from its checkpoint (exit 3 when it stopped
+# at a time limit, so nothing after it runs on stale weights).
 QAT_DATA ?= out/qat-data
 QAT_RUN ?= out/qat-run
 QAT_FLAGS ?= --steps 400 --batch 4 --lr 1e-4 --warmup 20 --threads 2
 qat: venv
 	$(CARGO) test --workspace --exclude satmap-nostd-check --no-run
-	test -f $(QAT_DATA)/index.json || target/debug/satmap-sim export-dataset --out $(QAT_DATA) \
+	target/debug/satmap-sim export-dataset --out $(QAT_DATA) \
 	  --train-seeds 1000..1040 --val-seeds 2000..2001 --test-seeds 3000..3001 --quiet
-	cd models && .venv/bin/python -m satmap_ref.train.qat --data ../$(QAT_DATA) \
-	  --weights weights/test_sat.safetensors --out ../$(QAT_RUN) $(QAT_FLAGS)
+	cd models && .venv/bin/python -m satmap_ref.train.qat --data $(abspath $(QAT_DATA)) \
+	  --weights weights/test_sat.safetensors --out $(abspath $(QAT_RUN)) $(QAT_FLAGS)
 	cp $(QAT_RUN)/weights.safetensors models/weights/test_sat_qat.safetensors
 	cd models && .venv/bin/python -m satmap_ref.export --config test --out build/test-qat \
 	  --weights weights/test_sat_qat.safetensors

@@ -439,7 +439,7 @@ const F16_MAPS: MapBounds = MapBounds {
 /// line (0.1 m), so int8 is never the default; bounded at 1.5 times the measured Chamfer and
 /// twice the share.
 const INT8_MAPS: MapBounds = MapBounds {
-    mean_chamfer_m: 0.28,
+    mean_chamfer_m: 0.29,
     changed_share: 0.045,
     map_drop_points: 1.0,
 };

@@ -11,6 +11,7 @@ use satmap_runtime::engine_tract::{LoadOptions, RangeLog, RangeMethod, TractEngi
 
 use satmap_runtime::translate::{compile, with_calibration};
 
+use crate::cli::drive::BadArgument;
 use crate::cli::export_dataset::{SeedRange, TRAIN_SEEDS};
 use crate::harness::ReplayConfig;
 use crate::harness::replay_with;
@@ -49,7 +50,8 @@ pub struct Args {
     pub calibration_method: RangeMethod,
     /// With `--calibrate`: keep every layer whose `stage/layer` name contains PATTERN in f32
     /// arithmetic (its weights stay int8, widened at load; repeatable): mixed precision for the
-    /// layers whose activations' rounding costs the most (docs/int8.md, "Sensitivity").
+    /// layers whose activations' rounding costs the most (docs/int8.md, "Where the activations'
+    /// error is").
     #[arg(long = "float-layer", value_name = "PATTERN")]
     pub float_layers: Vec<String>,
 }
@@ -138,7 +140,10 @@ pub fn keep_float(
             .iter()
             .any(|r| name(r).contains(p.as_str()))
         {
-            bail!("--float-layer {p:?} matches no calibrated layer (names are `stage/layer`)");
+            return Err(BadArgument(format!(
+                "--float-layer {p:?} matches no calibrated layer (names are `stage/layer`)"
+            ))
+            .into());
         }
     }
     calibration
@@ -184,7 +189,13 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(seeds) = args.calibrate {
         check_calibration(args.precision, seeds, args.calibration_frames)?;
     } else if !args.float_layers.is_empty() {
-        bail!("--float-layer takes --calibrate (without ranges every layer is f32 arithmetic)");
+        return Err(BadArgument(
+            "--float-layer takes --calibrate (without ranges every layer is f32 arithmetic)".into(),
+        )
+        .into());
+    }
+    if args.float_layers.iter().any(String::is_empty) {
+        return Err(BadArgument("--float-layer \"\" would name every layer".into()).into());
     }
     let layout = read_layout(args.layout.as_deref())?;
     let source = Bundle::open(&args.bundle)?;
@@ -285,6 +296,10 @@ mod tests {
         assert!(
             err.to_string().contains("matches no calibrated layer"),
             "{err}"
+        );
+        assert!(
+            err.downcast_ref::<BadArgument>().is_some(),
+            "a bad argument: {err}"
         );
     }
 }

@@ -46,9 +46,9 @@ KEPT = ("manifest.toml", "reference.safetensors")
 
 def same_inputs(frames: SatMapConfig, bundle: SatMapConfig) -> bool:
     """Whether frames exported for config `frames` are inputs of config `bundle`: the same
-    camera images, satellite crop and BEV range (`nano` takes `test`'s frames)."""
+    cameras, images, satellite crop and BEV range (`nano` takes `test`'s frames)."""
     def key(c: SatMapConfig) -> tuple:
-        return (c.image_h, c.image_w, c.sat_h, c.sat_w, tuple(c.pc_range_m))
+        return (tuple(c.cameras), c.image_h, c.image_w, c.sat_h, c.sat_w, tuple(c.pc_range_m))
     return key(frames) == key(bundle)
 
 

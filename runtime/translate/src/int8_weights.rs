@@ -33,7 +33,7 @@ use tract_nnef::tract_core::ops::cnn::{Conv, KernelFormat};
 use tract_nnef::tract_core::ops::einsum::prefix_matmul::PrefixMatMul;
 use tract_nnef::tract_core::ops::konst::Const;
 
-/// Elements at which a constant of rank 2 or more is stored as int8.
+/// Elements at which a constant with two axes longer than 1 may be stored as int8.
 pub const MIN_INT8_ELEMENTS: usize = 64;
 
 /// Values per output channel (the slice one scale covers) at which a constant is stored as int8.

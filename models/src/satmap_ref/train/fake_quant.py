@@ -1,7 +1,7 @@
 """Int8 weight fake-quantisation for quantisation-aware fine-tuning: the same rounding the
-runtime's `--precision int8` compile applies (`runtime/translate/src/int8_weights.rs`), put on
-the model's weights as a parametrisation so that training sees it and its gradient passes
-straight through (torch's `fake_quantize_per_channel_affine`).
+runtime's `--precision int8` compile applies (`runtime/translate/src/int8_weights.rs`: `w / s`
+in f32, rounded half away from zero), put on the model's weights as a parametrisation so that
+training sees it, with a straight-through gradient.
 
 The compile's rule, mirrored here per parameter: a tensor of at least `MIN_INT8_ELEMENTS`
 elements, with at least two axes longer than 1 and at least `MIN_CHANNEL_ELEMENTS` values per
@@ -13,7 +13,9 @@ Embedding `[N, C]`), and the compile's axis for the same tensor in the exported 
 Per-channel symmetric rounding commutes with a per-channel factor, so a BatchNorm folded into its
 convolution at export keeps a snapped kernel on its grid. Where the exported graph splits a
 weight along its input axis (a concatenated input) or folds it with a constant, the compile's
-grid differs and it rounds those few tensors again.
+grid differs and it rounds those few tensors again. Weights with fewer than 16 inputs a channel
+are stored f32 by the compile (so not rounded here) but quantised by the engine at load in a
+W8A8 bundle: five small layers of `test` (k = 8) whose rounding this fine-tuning does not see.
 """
 
 from __future__ import annotations
@@ -39,6 +41,11 @@ FOLDED_AT_EXPORT = (
     "pts_embedding.",
     "transformer.reference_points.",
     "decoder.layers.0.attentions.0.attn.in_proj_weight",
+    # Read by the image encoder stage as its own Parameters, past the parametrisation; the graph
+    # holds `level_embeds[0:1]` (`[1, C]`: kept f32) and `cams_embeds` rows (rounded by the
+    # compile on their own grid).
+    "transformer.cams_embeds",
+    "transformer.level_embeds",
 )
 
 
@@ -60,14 +67,24 @@ def channel_scales(w: torch.Tensor) -> torch.Tensor:
         return torch.where(m > 0, m / Q_MAX, torch.ones_like(m)).to(torch.float32)
 
 
+def compile_rounding(w: torch.Tensor) -> torch.Tensor:
+    """`int8_weights::quantize_per_channel` and the widening, in f32: `q = round(w / s)` half
+    away from zero (Rust's `f32::round`; torch's `round` and fake-quantisation round half to
+    even and multiply by `1 / s`), clamped to +-127, then `q * s`. No gradient."""
+    with torch.no_grad():
+        s = channel_scales(w).reshape(-1, *([1] * (w.dim() - 1)))
+        r = w.detach().float() / s
+        q = (torch.sign(r) * torch.floor(r.abs() + 0.5)).clamp(-Q_MAX, Q_MAX)
+        return (q * s).to(w.dtype)
+
+
 class Int8Weight(nn.Module):
-    """The parametrisation: `w -> scale * round(w / scale)` per output channel, with the
-    straight-through gradient."""
+    """The parametrisation: `w -> compile_rounding(w)` per output channel, with the
+    straight-through gradient (the identity's)."""
 
     def forward(self, w: torch.Tensor) -> torch.Tensor:
-        scale = channel_scales(w)
-        zero = torch.zeros(w.shape[0], dtype=torch.int32, device=w.device)
-        return torch.fake_quantize_per_channel_affine(w, scale, zero, 0, -Q_MAX, Q_MAX)
+        # `r + (w - w)`: exactly r in value (w + (r - w) may round), the identity's gradient.
+        return compile_rounding(w) + (w - w.detach())
 
 
 def attach(model: nn.Module) -> list[str]:

@@ -57,7 +57,8 @@ class QatArgs:
     clip_norm: float = 35.0
     activations: bool = False
     calibration_frames: int = 8
-    calibration_seeds: tuple[int, int] = (1000, 1005)
+    #: As `compile --calibrate 1000..1004` (exclusive: worlds 1000..=1003).
+    calibration_seeds: tuple[int, int] = (1000, 1004)
 
 
 def distill_loss(student: tuple[torch.Tensor, torch.Tensor],
@@ -120,9 +121,13 @@ def qat(args: QatArgs) -> dict[str, Any]:
         opt, lambda s: lr_factor(s, args.steps, args.warmup))
     step, elapsed = 0, 0.0
     ck = load_checkpoint(out / CHECKPOINT)
+    settings = {"config": cfg.name, "weights": str(args.weights), "batch": args.batch,
+                "seed": args.seed, "activations": args.activations,
+                "calibration": [*args.calibration_seeds, args.calibration_frames]}
     if ck is not None:
-        if ck.get("kind") != "qat" or ck["config"] != cfg.name:
-            raise ValueError(f"{out / CHECKPOINT} is not a {cfg.name} QAT run")
+        if ck.get("kind") != "qat" or ck.get("settings") != settings:
+            raise ValueError(f"{out / CHECKPOINT} is a run of other settings "
+                             f"({ck.get('settings')}); resume it with those, not {settings}")
         step, elapsed = restore(ck, model, opt, sched, sampler, args.steps, args.warmup)
         if acts is not None:
             acts.freeze(ck["activation_abs_max"])
@@ -136,7 +141,8 @@ def qat(args: QatArgs) -> dict[str, Any]:
 
     def checkpoint() -> None:
         save_checkpoint(out / CHECKPOINT, {
-            "kind": "qat", "step": step, "elapsed_s": elapsed, "config": cfg.name,
+            "kind": "qat", "settings": settings, "step": step, "elapsed_s": elapsed,
+            "config": cfg.name,
             "model": model.state_dict(), "optimizer": opt.state_dict(),
             "scheduler": sched.state_dict(), "sampler": sampler.state_dict(),
             "activation_abs_max": None if acts is None else acts.abs_max})
@@ -203,10 +209,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--activations", action="store_true",
                     help="also fake-quantise the layers' inputs (W8A8; ranges calibrated first)")
     a = ap.parse_args(argv)
-    print(json.dumps(qat(QatArgs(
+    summary = qat(QatArgs(
         data=a.data, weights=a.weights, out=a.out, steps=a.steps, batch=a.batch, lr=a.lr,
         warmup=a.warmup, seed=a.seed, threads=a.threads, time_limit_min=a.time_limit_min,
-        ckpt_every=a.ckpt_every, activations=a.activations))))
+        ckpt_every=a.ckpt_every, activations=a.activations))
+    print(json.dumps(summary))
+    if not summary["finished"]:
+        # Stopped at --time-limit-min: checkpointed, no weights yet; run it again to resume.
+        raise SystemExit(3)
 
 
 if __name__ == "__main__":

@@ -297,8 +297,49 @@ mod tests {
             }
         }
         let mut out = vec![7u32; plane];
-        assert!(!quads(&[0.0; 10], [4, h, w], 1.0, &mut out));
-        assert!(!quads(&[0.0; 60], [5, h, w], 1.0, &mut out));
+        assert!(!quads(&[0.0; 10], [4, h, w], 1.0, &mut out)); // x short
+        assert!(!quads(&[0.0; 75], [5, h, w], 1.0, &mut out)); // out short (2 planes needed)
         assert!(out.iter().all(|&v| v == 7));
+    }
+
+    /// Every build of the quad loop this CPU can run (the dispatcher runs only the widest) gives
+    /// the portable body's values; a build the CPU lacks is skipped and says so.
+    #[test]
+    fn every_quads_build_gives_the_portable_values() {
+        let (c, h, w) = (7usize, 5, 9);
+        let x: Vec<f32> = (0..c * h * w)
+            .map(|i| (i as f32 * 0.91).cos() * 3.0)
+            .collect();
+        let want = {
+            let mut out = vec![0u32; c.div_ceil(4) * h * w];
+            quads_body(&x, [c, h, w], 127.0 / 2.5, &mut out);
+            out
+        };
+        #[cfg(target_arch = "x86_64")]
+        {
+            type Build = unsafe fn(&[f32], [usize; 3], f32, &mut [u32]);
+            let builds: [(&str, bool, Build); 2] = [
+                (
+                    "avx512",
+                    std::is_x86_feature_detected!("avx512f")
+                        && std::is_x86_feature_detected!("avx512bw"),
+                    quads_avx512,
+                ),
+                ("avx2", std::is_x86_feature_detected!("avx2"), quads_avx2),
+            ];
+            for (name, present, build) in builds {
+                if !present {
+                    println!("quads build {name}: skipped, not on this CPU");
+                    continue;
+                }
+                let mut out = vec![u32::MAX; want.len()];
+                // SAFETY: the build's features were detected just above.
+                unsafe { build(&x, [c, h, w], 127.0 / 2.5, &mut out) };
+                assert_eq!(out, want, "{name}");
+            }
+        }
+        let mut out = vec![u32::MAX; want.len()];
+        assert!(quads(&x, [c, h, w], 127.0 / 2.5, &mut out));
+        assert_eq!(out, want);
     }
 }

@@ -56,7 +56,7 @@ const INT8_BOUNDS: [(&str, f32); 8] = [
     ("gathered", 0.039),     // 1.91e-2
     ("camera_bev", 0.194),   // 9.67e-2
     ("satellite_bev", 0.21), // 1.05e-1
-    ("class_logits", 1.0),   // 5.02e-1
+    ("class_logits", 1.01),  // 5.02e-1
     ("points", 0.147),       // 7.33e-2 (normalised to the BEV range)
 ];
 
