@@ -103,7 +103,8 @@ impl QRows {
         self.k
     }
 
-    /// The rows from row `r0` on.
+    /// The rows from row `r0` on (the VNNI tiles' operand: x86 only).
+    #[cfg(target_arch = "x86_64")]
     pub(crate) fn rows_from(&self, r0: usize) -> &[i8] {
         &self.rows[r0 * padded_k(self.k)..]
     }
