@@ -38,3 +38,16 @@ def test_nano_takes_test_frames_and_paper_does_not():
     test, nano, paper = (get_config(n) for n in ("test", "nano", "paper"))
     assert same_inputs(test, nano) and same_inputs(test, test)
     assert not same_inputs(test, paper)  # half-scale images, a finer satellite crop
+
+
+def test_frames_of_other_inputs_are_refused_before_anything_runs(tmp_path):
+    import pytest
+    from satmap_ref.ort_int8 import FramesNotInputs, quantise_bundle
+    from test_train import write_fake_dataset
+    data = write_fake_dataset(tmp_path / "ds", {"train": [1000], "val": [], "test": []}, 1)
+    bundle = tmp_path / "paper"
+    bundle.mkdir()
+    (bundle / "manifest.toml").write_text('[model]\nconfig = "paper"\n')
+    with pytest.raises(FramesNotInputs, match="not inputs of"):
+        quantise_bundle(bundle, data, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -52,13 +52,18 @@ def same_inputs(frames: SatMapConfig, bundle: SatMapConfig) -> bool:
     return key(frames) == key(bundle)
 
 
+class FramesNotInputs(ValueError):
+    """The dataset's frames are not inputs of the bundle's config (`same_inputs`)."""
+
+
 def calibration_feeds(bundle: Path, data: Path) -> dict[str, list[dict[str, np.ndarray]]]:
     """Every stage's input feeds over the training-split frames of the dataset `data`, through
     the bundle's own config (its LUT and stages)."""
     ds = SatMapDataset(data)
     cfg = get_config(_bundle_config(bundle))
     if not same_inputs(ds.cfg, cfg):
-        raise ValueError(f"{data} holds `{ds.cfg.name}` frames, not inputs of `{cfg.name}`")
+        raise FramesNotInputs(f"{data} holds `{ds.cfg.name}` frames, not inputs of {bundle} "
+                              f"(`{cfg.name}`)")
     runner = StagedRunner(cfg, bundle)
     lut = build_lut(cfg, lidar2img_all(load_calibration(DEFAULT_CALIBRATION), cfg.image_scale))
     feeds: dict[str, list[dict[str, np.ndarray]]] = {"image_encoder": []}
@@ -124,13 +129,11 @@ def main(argv: list[str] | None = None) -> None:
                     help="u8: asymmetric unsigned (onnxruntime's x86 recommendation, the "
                          "default); s8: symmetric signed, as ours")
     a = ap.parse_args(argv)
-    frames_cfg = SatMapDataset(a.data).cfg
-    bundle_cfg = get_config(_bundle_config(a.bundle))
-    if not same_inputs(frames_cfg, bundle_cfg):
-        sys.exit(f"{a.data} holds `{frames_cfg.name}` frames, not inputs of {a.bundle} "
-                 f"(`{bundle_cfg.name}`)")
-    quantise_bundle(a.bundle, a.data, a.out, a.activations,
-                    log=lambda s: print(s, file=sys.stderr))
+    try:
+        quantise_bundle(a.bundle, a.data, a.out, a.activations,
+                        log=lambda s: print(s, file=sys.stderr))
+    except FramesNotInputs as e:  # refused before anything is written
+        sys.exit(str(e))
     print(f"wrote {a.out}")
 
 

@@ -142,7 +142,6 @@ def qat(args: QatArgs) -> dict[str, Any]:
     def checkpoint() -> None:
         save_checkpoint(out / CHECKPOINT, {
             "kind": "qat", "settings": settings, "step": step, "elapsed_s": elapsed,
-            "config": cfg.name,
             "model": model.state_dict(), "optimizer": opt.state_dict(),
             "scheduler": sched.state_dict(), "sampler": sampler.state_dict(),
             "activation_abs_max": None if acts is None else acts.abs_max})
