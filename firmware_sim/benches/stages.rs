@@ -14,7 +14,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use satmap_runtime::calibration::from_toml_file;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::satellite::FixedCrop;
-use satmap_runtime::{Engine, SatMap};
+use satmap_runtime::{Engine, FeaturesMut, FeaturesRef, SatMap};
 use satmap_sim::cli::bench_stages::{ReferenceInputs, still_frame};
 
 fn bench(c: &mut Criterion) {
@@ -55,14 +55,14 @@ fn bench(c: &mut Criterion) {
     g.bench_function("bev_encoder", |b| {
         b.iter(|| {
             engine
-                .bev_encode(black_box(&r.query), &r.gathered, &mut bev)
+                .bev_encode(black_box(&r.query), &r.gathered, FeaturesMut::F32(&mut bev))
                 .expect("runs")
         })
     });
     g.bench_function("satellite_encoder", |b| {
         b.iter(|| {
             engine
-                .encode_satellite(black_box(&r.crop), &mut bev)
+                .encode_satellite(black_box(&r.crop), FeaturesMut::F32(&mut bev))
                 .expect("runs")
         })
     });
@@ -70,8 +70,8 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             engine
                 .decode_map(
-                    black_box(&r.camera_bev),
-                    &r.satellite_bev,
+                    FeaturesRef::F32(black_box(&r.camera_bev)),
+                    FeaturesRef::F32(&r.satellite_bev),
                     &mut logits,
                     &mut points,
                 )

@@ -13,7 +13,6 @@ use std::sync::OnceLock;
 use crate::common::{bundle_dir, max_abs_diff};
 use satmap_ecu_tests::golden::compiled_path;
 use satmap_layout::MemoryLayout;
-use satmap_runtime::MemoryError;
 use satmap_runtime::bundle::archive::write_archive;
 use satmap_runtime::bundle::{
     Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Sha256Digest, Trust,
@@ -22,6 +21,7 @@ use satmap_runtime::capacity::layout;
 use satmap_runtime::engine::Stage;
 use satmap_runtime::engine_tract::TractEngine;
 use satmap_runtime::translate::{CompileError, compile, stage_entry_name};
+use satmap_runtime::{FeatureStorage, MemoryError};
 
 /// The parity bound of `golden_step.rs`, against the onnxruntime reference.
 const STAGE_TOL: f32 = 1e-4;
@@ -35,9 +35,14 @@ fn built_in_capacity() -> impl Fn(&str) -> Option<usize> {
 /// The committed `test` folder compiled to `precision`.
 fn compile_test_folder(precision: Precision) -> Vec<u8> {
     let source = Bundle::open(bundle_dir()).unwrap();
-    compile(&source, precision, built_in_capacity())
-        .unwrap()
-        .bytes
+    compile(
+        &source,
+        precision,
+        FeatureStorage::LAYOUT,
+        built_in_capacity(),
+    )
+    .unwrap()
+    .bytes
 }
 
 /// The `test` bundle compiled once per test process.
@@ -319,7 +324,7 @@ fn a_graph_with_swapped_inputs_is_refused() {
 fn a_layout_too_small_is_refused_before_translation() {
     let source = Bundle::open(bundle_dir()).unwrap();
     let full = built_in_capacity();
-    let needed = satmap_runtime::regions::region_needs(source.dims())
+    let needed = satmap_runtime::regions::region_needs(source.dims(), FeatureStorage::LAYOUT)
         .into_iter()
         .find(|(r, _)| *r == "points")
         .unwrap()
@@ -331,7 +336,7 @@ fn a_layout_too_small_is_refused_before_translation() {
             full(name)
         }
     };
-    match compile(&source, Precision::F32, short) {
+    match compile(&source, Precision::F32, FeatureStorage::LAYOUT, short) {
         Err(CompileError::Layout(MemoryError::RegionTooSmall { region, .. })) => {
             assert_eq!(region, "points");
         }
@@ -400,7 +405,7 @@ fn a_quantised_onnx_folder_is_refused() {
     let source = Bundle::open(&dir).unwrap();
     assert_eq!(source.manifest().precision, Precision::Int8);
     for asked in Precision::ALL {
-        match compile(&source, asked, built_in_capacity()) {
+        match compile(&source, asked, FeatureStorage::LAYOUT, built_in_capacity()) {
             Err(CompileError::Precision { asked: a, why, .. }) => {
                 assert_eq!(a, asked);
                 println!("{asked}: {why}");

@@ -9,10 +9,10 @@
 use std::path::{Path, PathBuf};
 
 use satmap_layout::MemoryLayout;
-use satmap_runtime::MemoryError;
 use satmap_runtime::capacity::layout;
 use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::regions::{MODEL_REGIONS, check_regions, check_regions_with, region_needs};
+use satmap_runtime::{FeatureStorage, MemoryError};
 
 /// Regions whose size does not depend on the model: the runtime asserts them against its own
 /// types at compile time (`regions.rs`, `route_pack`), so every variant must keep them.
@@ -33,8 +33,16 @@ fn parse(path: &Path) -> MemoryLayout {
     MemoryLayout::parse(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// The storage `map` gives the BEV feature maps.
+fn bev_storage(map: &MemoryLayout) -> FeatureStorage {
+    let dtype = map.region("camera_bev").unwrap().dtype;
+    FeatureStorage::from_name(dtype.name()).unwrap()
+}
+
 fn fits(dims: &ModelDims, map: &MemoryLayout) -> Result<(), MemoryError> {
-    check_regions_with(dims, |name| map.region(name).map(|r| r.bytes))
+    check_regions_with(dims, bev_storage(map), |name| {
+        map.region(name).map(|r| r.bytes)
+    })
 }
 
 /// Every `layouts/*.toml`, by file stem.
@@ -61,7 +69,12 @@ fn every_variant_layout_parses_and_keeps_the_default_regions() {
         "layouts/paper.toml is missing"
     );
     for (name, map) in &variants {
-        assert_eq!(&map.sized_for, name, "layouts/{name}.toml: sized_for");
+        // `<config>.toml`, or `<config>-<option>.toml` for a variant of a config's layout.
+        assert!(
+            *name == map.sized_for || name.starts_with(&format!("{}-", map.sized_for)),
+            "layouts/{name}.toml: sized_for {}",
+            map.sized_for
+        );
         assert!(
             map.region.keys().eq(default.region.keys()),
             "layouts/{name}.toml: region names differ from memory_layout.toml"
@@ -87,7 +100,7 @@ fn paper_layout_is_sized_for_the_paper_dims() {
     assert_eq!(dims.validate(), Ok(()));
     assert_eq!(fits(&dims, &paper), Ok(()));
     // Sized for the paper, not merely large enough: each model region is exactly what it needs.
-    for (region, needed) in region_needs(&dims) {
+    for (region, needed) in region_needs(&dims, FeatureStorage::F32) {
         assert_eq!(
             paper.region(region).unwrap().bytes,
             needed,
@@ -106,6 +119,42 @@ fn paper_layout_is_sized_for_the_paper_dims() {
             capacity_bytes: 600
         })
     ));
+}
+
+#[test]
+fn the_f16_bev_layout_is_the_default_with_both_bevs_halved() {
+    let default = parse(&root().join("memory_layout.toml"));
+    let half = parse(&root().join("layouts/nano-f16-bev.toml"));
+    assert_eq!(bev_storage(&default), FeatureStorage::F32);
+    assert_eq!(bev_storage(&half), FeatureStorage::F16);
+    for (name, region) in &half.region {
+        let wide = default.region(name).unwrap();
+        if name.ends_with("_bev") {
+            assert_eq!(region.shape, wide.shape, "{name}");
+            assert_eq!(region.bytes * 2, wide.bytes, "{name}");
+        } else {
+            assert_eq!(region, wide, "{name}");
+        }
+    }
+    assert_eq!(
+        default.runtime_bytes() - half.runtime_bytes(),
+        2 * 80 * 40 * 256 * 2
+    );
+    // Sized for nano: nano's dims fit in f16 storage; in f32 the BEVs overflow, by region.
+    let mut nano = ModelDims::test_config();
+    nano.embed_dims = 256;
+    nano.num_vec = 100;
+    assert_eq!(fits(&nano, &half), Ok(()));
+    assert_eq!(
+        check_regions_with(&nano, FeatureStorage::F32, |name| half
+            .region(name)
+            .map(|r| r.bytes)),
+        Err(MemoryError::RegionTooSmall {
+            region: "camera_bev",
+            needed_bytes: 80 * 40 * 256 * 4,
+            capacity_bytes: 80 * 40 * 256 * 2,
+        })
+    );
 }
 
 #[test]
@@ -133,7 +182,11 @@ fn built_in_constants_are_the_built_in_layout_file() {
     for dims in [ModelDims::test_config(), ModelDims::paper_config()] {
         assert_eq!(check_regions(&dims), fits(&dims, &built_in));
     }
-    for (i, (region, _)) in region_needs(&ModelDims::test_config()).iter().enumerate() {
+    assert_eq!(bev_storage(&built_in), FeatureStorage::LAYOUT);
+    for (i, (region, _)) in region_needs(&ModelDims::test_config(), FeatureStorage::LAYOUT)
+        .iter()
+        .enumerate()
+    {
         assert_eq!(*region, MODEL_REGIONS[i]);
         assert!(built_in.region(region).is_some(), "{region}");
     }

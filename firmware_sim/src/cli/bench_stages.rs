@@ -18,6 +18,7 @@ use satmap_runtime::engine::{Engine, Stage};
 use satmap_runtime::engine_tract::{
     MAX_ENGINE_THREADS, Rewrites, TractEngine, gemm, kernel_family,
 };
+use satmap_runtime::features::{FeaturesMut, FeaturesRef};
 use satmap_runtime::model_dims::ModelDims;
 use satmap_runtime::satellite::FixedCrop;
 use satmap_runtime::{CameraImage, EgoMotion, EgoPose, Frame, SatMap};
@@ -230,12 +231,19 @@ pub fn measure(args: &Args) -> Result<StageTimes> {
         match stage {
             Stage::ImageEncoder => time_ms(n, || Ok(e.encode_image(0, &r.image, &mut value)?)),
             Stage::BevQuery => time_ms(n, || Ok(e.bev_query(&r.can_bus, &mut q, &mut w)?)),
-            Stage::BevEncoder => {
-                time_ms(n, || Ok(e.bev_encode(&r.query, &r.gathered, &mut bev)?))
-            }
-            Stage::SatelliteEncoder => time_ms(n, || Ok(e.encode_satellite(&r.crop, &mut bev)?)),
+            Stage::BevEncoder => time_ms(n, || {
+                Ok(e.bev_encode(&r.query, &r.gathered, FeaturesMut::F32(&mut bev))?)
+            }),
+            Stage::SatelliteEncoder => time_ms(n, || {
+                Ok(e.encode_satellite(&r.crop, FeaturesMut::F32(&mut bev))?)
+            }),
             Stage::MapDecoder => time_ms(n, || {
-                Ok(e.decode_map(&r.camera_bev, &r.satellite_bev, &mut logits, &mut points)?)
+                Ok(e.decode_map(
+                    FeaturesRef::F32(&r.camera_bev),
+                    FeaturesRef::F32(&r.satellite_bev),
+                    &mut logits,
+                    &mut points,
+                )?)
             }),
         }
     };

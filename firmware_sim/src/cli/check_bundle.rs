@@ -15,6 +15,7 @@ use satmap_runtime::bundle::{Bundle, BundlePublicKey, Trust};
 use satmap_runtime::capacity::CAN_BUS_LEN;
 use satmap_runtime::engine::Engine;
 use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::features::{FeaturesMut, FeaturesRef};
 use satmap_runtime::model_dims::ModelDims;
 
 /// Arguments of `check-bundle`.
@@ -428,7 +429,7 @@ pub fn check_all(
     let mut cam = vec![0.0; want.len()];
     let ms = timed(&mut || {
         engine
-            .bev_encode(&query, &gathered, &mut cam)
+            .bev_encode(&query, &gathered, FeaturesMut::F32(&mut cam))
             .map_err(|e| stage("bev_encoder", &e))
     })?;
     checks.push(compare("bev_encoder.camera_bev", &cam, &want, ms));
@@ -438,7 +439,7 @@ pub fn check_all(
     let mut sat = vec![0.0; want.len()];
     let ms = timed(&mut || {
         engine
-            .encode_satellite(crop, &mut sat)
+            .encode_satellite(crop, FeaturesMut::F32(&mut sat))
             .map_err(|e| stage("satellite_encoder", &e))
     })?;
     checks.push(compare("satellite_encoder.satellite_bev", &sat, &want, ms));
@@ -450,7 +451,12 @@ pub fn check_all(
     let (mut l, mut p) = (vec![0.0; want_l.len()], vec![0.0; want_p.len()]);
     let ms = timed(&mut || {
         engine
-            .decode_map(&cam_bev, &sat_bev, &mut l, &mut p)
+            .decode_map(
+                FeaturesRef::F32(&cam_bev),
+                FeaturesRef::F32(&sat_bev),
+                &mut l,
+                &mut p,
+            )
             .map_err(|e| stage("map_decoder", &e))
     })?;
     checks.push(compare("map_decoder.class_logits", &l, &want_l, ms));

@@ -16,7 +16,7 @@ use crate::cli::export_dataset::{SeedRange, TRAIN_SEEDS};
 use crate::harness::ReplayConfig;
 use crate::harness::replay_with;
 
-use crate::cli::memory_map::{built_in_layout_line, read_layout};
+use crate::cli::memory_map::{bev_storage, built_in_layout_line, read_layout};
 
 /// Arguments of `compile`.
 #[derive(clap::Args, Debug)]
@@ -210,7 +210,7 @@ pub fn run(args: &Args) -> Result<()> {
         );
         return Ok(());
     }
-    let compiled = compile(&source, args.precision, |name| {
+    let compiled = compile(&source, args.precision, bev_storage(&layout), |name| {
         layout.region(name).map(|r| r.bytes)
     })?;
     std::fs::write(&args.out, &compiled.bytes)

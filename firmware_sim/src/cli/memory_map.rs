@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use satmap_layout::MemoryLayout;
-use satmap_runtime::MemoryError;
 use satmap_runtime::bundle::Bundle;
 use satmap_runtime::capacity::layout;
 use satmap_runtime::regions::check_regions_with;
+use satmap_runtime::{FeatureStorage, MemoryError};
 
 use crate::cli::drive::BadArgument;
 
@@ -51,6 +51,16 @@ pub fn read_layout(path: Option<&Path>) -> Result<MemoryLayout> {
     })
 }
 
+/// The storage `map` gives the BEV feature maps (`satmap-layout` checked that both BEV regions
+/// are f32 or both f16).
+#[must_use]
+pub fn bev_storage(map: &MemoryLayout) -> FeatureStorage {
+    match map.region("camera_bev").map(|r| r.dtype) {
+        Some(satmap_layout::DType::F16) => FeatureStorage::F16,
+        _ => FeatureStorage::F32,
+    }
+}
+
 /// Arguments of `memory-map`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -76,7 +86,9 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(dir) = &args.bundle {
         // Bundle errors name the file that failed; a context would print the folder twice.
         let bundle = Bundle::open(dir)?;
-        let fits = check_regions_with(bundle.dims(), |name| map.region(name).map(|r| r.bytes));
+        let fits = check_regions_with(bundle.dims(), bev_storage(&map), |name| {
+            map.region(name).map(|r| r.bytes)
+        });
         match (fits, &args.layout) {
             (Ok(()), _) => {}
             // The built-in layout: the harness's message, which names it.

@@ -13,6 +13,7 @@
 use satmap_runtime::calibration::NUM_CAMERAS;
 use satmap_runtime::capacity::CAN_BUS_LEN;
 use satmap_runtime::engine::{Engine, EngineError};
+use satmap_runtime::features::{FeaturesMut, FeaturesRef};
 
 use super::HarnessError;
 use crate::arena::{ArenaAllocator, ArenaRegion};
@@ -37,11 +38,11 @@ fn run_stages<E: Engine>(engine: &mut E, b: &mut Buffers) -> Result<(), EngineEr
     for camera in 0..NUM_CAMERAS {
         engine.encode_image(camera, &b.image, &mut b.value)?;
     }
-    engine.bev_encode(&b.query, &b.gathered, &mut b.camera_bev)?;
-    engine.encode_satellite(&b.crop, &mut b.satellite_bev)?;
+    engine.bev_encode(&b.query, &b.gathered, FeaturesMut::F32(&mut b.camera_bev))?;
+    engine.encode_satellite(&b.crop, FeaturesMut::F32(&mut b.satellite_bev))?;
     engine.decode_map(
-        &b.camera_bev,
-        &b.satellite_bev,
+        FeaturesRef::F32(&b.camera_bev),
+        FeaturesRef::F32(&b.satellite_bev),
         &mut b.logits,
         &mut b.points,
     )

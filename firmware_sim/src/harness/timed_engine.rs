@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use satmap_runtime::capacity::CAN_BUS_LEN;
 use satmap_runtime::engine::{Engine, EngineError};
+use satmap_runtime::features::{FeaturesMut, FeaturesRef};
 use satmap_runtime::model_dims::ModelDims;
 
 use super::stats::Series;
@@ -190,7 +191,7 @@ impl<E: Engine> Engine for TimedEngine<E> {
         &mut self,
         query: &[f32],
         gathered: &[f32],
-        camera_bev_out: &mut [f32],
+        camera_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError> {
         if let Some(t) = self.images_done.take() {
             self.timings.record(Timed::GktGather, micros_since(t));
@@ -203,7 +204,7 @@ impl<E: Engine> Engine for TimedEngine<E> {
     fn encode_satellite(
         &mut self,
         crop_rgb: &[u8],
-        satellite_bev_out: &mut [f32],
+        satellite_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError> {
         self.timed(Timed::SatelliteEncoder, |e| {
             e.encode_satellite(crop_rgb, satellite_bev_out)
@@ -212,8 +213,8 @@ impl<E: Engine> Engine for TimedEngine<E> {
 
     fn decode_map(
         &mut self,
-        camera_bev: &[f32],
-        satellite_bev: &[f32],
+        camera_bev: FeaturesRef<'_>,
+        satellite_bev: FeaturesRef<'_>,
         class_logits_out: &mut [f32],
         points_out: &mut [f32],
     ) -> Result<(), EngineError> {

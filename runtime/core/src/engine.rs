@@ -3,11 +3,14 @@
 //! unit tests use a deterministic pure-Rust double.
 //!
 //! Every buffer is owned by the step and sized from [`ModelDims`] at init; an engine writes
-//! every element of each `_out` slice and must not keep references to them.
+//! every element of each `_out` slice and must not keep references to them. The two BEV feature
+//! maps come in the storage the runtime chose ([`crate::features`]): an engine computes in f32
+//! and stores into them, or widens them, through [`FeaturesMut`] and [`FeaturesRef`].
 
 use core::fmt;
 
 use crate::capacity::CAN_BUS_LEN;
+use crate::features::{FeaturesMut, FeaturesRef};
 use crate::model_dims::ModelDims;
 
 /// The graph stages, in step order.
@@ -170,7 +173,8 @@ pub trait Engine {
         gkt_weights_out: &mut [f32],
     ) -> Result<(), EngineError>;
 
-    /// Camera BEV `[bev_h, bev_w, D]` from the queries and the gathered features (`[Q, D]` each).
+    /// Camera BEV `[bev_h, bev_w, D]` from the queries and the gathered features (`[Q, D]` each),
+    /// stored in `camera_bev_out`'s storage.
     ///
     /// # Errors
     /// An [`EngineError`] with `stage = BevEncoder`.
@@ -178,17 +182,18 @@ pub trait Engine {
         &mut self,
         query: &[f32],
         gathered: &[f32],
-        camera_bev_out: &mut [f32],
+        camera_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError>;
 
-    /// Satellite BEV `[bev_h, bev_w, D]` from the crop (`[sat_h, sat_w, 3]` u8).
+    /// Satellite BEV `[bev_h, bev_w, D]` from the crop (`[sat_h, sat_w, 3]` u8), stored in
+    /// `satellite_bev_out`'s storage.
     ///
     /// # Errors
     /// An [`EngineError`] with `stage = SatelliteEncoder`.
     fn encode_satellite(
         &mut self,
         crop_rgb: &[u8],
-        satellite_bev_out: &mut [f32],
+        satellite_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError>;
 
     /// Class logits `[num_vec, 3]` and normalised points `[num_vec, num_pts, 2]` from both BEVs.
@@ -197,8 +202,8 @@ pub trait Engine {
     /// An [`EngineError`] with `stage = MapDecoder`.
     fn decode_map(
         &mut self,
-        camera_bev: &[f32],
-        satellite_bev: &[f32],
+        camera_bev: FeaturesRef<'_>,
+        satellite_bev: FeaturesRef<'_>,
         class_logits_out: &mut [f32],
         points_out: &mut [f32],
     ) -> Result<(), EngineError>;

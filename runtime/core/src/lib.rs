@@ -1,7 +1,7 @@
 //! `satmap-core` (no_std + alloc): frame and its checks, model dims, calibration, GKT, geodesy,
-//! route packs, map frame and wire, decode, memory (capacity, buffers, regions, placement), the
-//! [`Engine`] contract and the step state machine. May import: no other SatMap crate; names no
-//! tract, and std only for CPU detection behind its `std` feature.
+//! route packs, map frame and wire, decode, memory (capacity, buffers, regions, placement, the
+//! BEV feature storage), the [`Engine`] contract and the step state machine. May import: no
+//! other SatMap crate; names no tract, and std only for CPU detection behind its `std` feature.
 //!
 //! Everything here runs on every target, the bare-metal safety core included: the GKT look-up
 //! table and gather-sum kernel, decode, input checks and the deterministic step state machine.
@@ -19,6 +19,7 @@ pub mod can_bus;
 pub mod capacity;
 pub mod decode;
 pub mod engine;
+pub mod features;
 pub mod frame;
 pub mod geo;
 pub mod gkt;
@@ -40,6 +41,7 @@ pub use heapless;
 pub use buffers::MemoryError;
 pub use calibration::Calibration;
 pub use engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
+pub use features::{FeatureStorage, FeaturesMut, FeaturesRef};
 pub use frame::{CameraImage, CameraMask, CameraState, Frame, FrameError};
 pub use map_frame::{Health, MapClass, MapElement, MapFrame, SatellitePrior};
 pub use model_dims::{DimsError, ModelDims};

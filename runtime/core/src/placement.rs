@@ -11,6 +11,7 @@
 use crate::buffers::MemoryError;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::layout;
+use crate::features::{FeatureStorage, PlacedFeatures};
 use crate::gkt::Lut;
 use crate::model_dims::ModelDims;
 
@@ -68,9 +69,9 @@ pub(crate) struct StepRegions {
     pub(crate) bev_query: &'static mut [f32],
     pub(crate) gkt_weights: &'static mut [f32],
     pub(crate) gathered: &'static mut [f32],
-    pub(crate) camera_bev: &'static mut [f32],
+    pub(crate) camera_bev: PlacedFeatures,
     pub(crate) satellite_crop: &'static mut [u8],
-    pub(crate) satellite_bev: &'static mut [f32],
+    pub(crate) satellite_bev: PlacedFeatures,
     pub(crate) class_logits: &'static mut [f32],
     pub(crate) points: &'static mut [f32],
 }
@@ -84,7 +85,8 @@ pub(crate) struct LutRegions {
 
 impl RuntimeRegions {
     /// Check every region (size against the layout, alignment) and cut the model's buffers
-    /// from them. `dims` must already fit the layout (`regions::check_regions`).
+    /// from them, the BEVs in the layout's storage ([`FeatureStorage::LAYOUT`]). `dims` must
+    /// already fit the layout (`regions::check_regions`).
     pub(crate) fn split(self, dims: &ModelDims) -> Result<(StepRegions, LutRegions), MemoryError> {
         let Self {
             value_features,
@@ -124,9 +126,9 @@ impl RuntimeRegions {
             bev_query: f32s(s_query, bev_query, dims.bev_len())?,
             gkt_weights: f32s(s_weights, gkt_weights, dims.weights_len())?,
             gathered: f32s(s_gathered, gathered, dims.bev_len())?,
-            camera_bev: f32s(s_camera_bev, camera_bev, dims.bev_len())?,
+            camera_bev: features(s_camera_bev, camera_bev, dims.bev_len())?,
             satellite_crop: &mut checked(s_crop, satellite_crop)?[..dims.crop_bytes()],
-            satellite_bev: f32s(s_sat_bev, satellite_bev, dims.bev_len())?,
+            satellite_bev: features(s_sat_bev, satellite_bev, dims.bev_len())?,
             class_logits: f32s(s_logits, class_logits, dims.logits_len())?,
             points: f32s(s_points, points, dims.points_len())?,
         };
@@ -162,6 +164,21 @@ fn f32s(
         MemoryError::RegionMisaligned {
             region: spec.name,
             align: REGION_ALIGN,
+        }
+    })
+}
+
+/// A BEV region cut to `len` elements of the layout's storage.
+fn features(
+    spec: RegionSpec,
+    region: &'static mut [u8],
+    len: usize,
+) -> Result<PlacedFeatures, MemoryError> {
+    Ok(match FeatureStorage::LAYOUT {
+        FeatureStorage::F32 => PlacedFeatures::F32(f32s(spec, region, len)?),
+        FeatureStorage::F16 => {
+            let region = checked(spec, region)?;
+            PlacedFeatures::F16(u16s(spec, &mut region[..len * 2])?)
         }
     })
 }

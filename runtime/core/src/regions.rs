@@ -6,6 +6,7 @@
 use crate::buffers::MemoryError;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::layout;
+use crate::features::FeatureStorage;
 use crate::model_dims::ModelDims;
 
 // The tile cache region of the layout must describe the route-pack cache that exists.
@@ -31,10 +32,12 @@ pub const MODEL_REGIONS: [&str; 11] = [
     "points",
 ];
 
-/// Bytes `dims` needs in each of [`MODEL_REGIONS`], as (region name, bytes), in that order.
+/// Bytes `dims` needs in each of [`MODEL_REGIONS`], as (region name, bytes), in that order,
+/// with the BEV feature maps in `bev` storage.
 #[must_use]
-pub fn region_needs(dims: &ModelDims) -> [(&'static str, usize); 11] {
+pub fn region_needs(dims: &ModelDims, bev: FeatureStorage) -> [(&'static str, usize); 11] {
     let f32s = |n: usize| n.saturating_mul(4);
+    let bevs = |n: usize| n.saturating_mul(bev.elem_bytes());
     let needs = [
         NUM_CAMERAS.saturating_mul(dims.image_bytes()),
         f32s(NUM_CAMERAS.saturating_mul(dims.value_len())),
@@ -42,9 +45,9 @@ pub fn region_needs(dims: &ModelDims) -> [(&'static str, usize); 11] {
         f32s(dims.bev_len()),
         f32s(dims.weights_len()),
         f32s(dims.bev_len()),
-        f32s(dims.bev_len()),
+        bevs(dims.bev_len()),
         dims.crop_bytes(),
-        f32s(dims.bev_len()),
+        bevs(dims.bev_len()),
         f32s(dims.logits_len()),
         f32s(dims.points_len()),
     ];
@@ -52,7 +55,7 @@ pub fn region_needs(dims: &ModelDims) -> [(&'static str, usize); 11] {
 }
 
 /// Capacity of a model-dependent region in the layout this build was generated from.
-fn built_in_capacity(region: &str) -> Option<usize> {
+pub(crate) fn built_in_capacity(region: &str) -> Option<usize> {
     Some(match region {
         "camera_images" => layout::CAMERA_IMAGES_BYTES,
         "value_features" => layout::VALUE_FEATURES_BYTES,
@@ -70,25 +73,28 @@ fn built_in_capacity(region: &str) -> Option<usize> {
 }
 
 /// Check that every runtime-owned region `dims` needs fits its capacity in the memory layout
-/// this build was generated from (`memory_layout.toml`, or the build's `SATMAP_LAYOUT` file).
+/// this build was generated from (`memory_layout.toml`, or the build's `SATMAP_LAYOUT` file),
+/// the BEVs in that layout's storage ([`FeatureStorage::LAYOUT`]).
 ///
 /// # Errors
 /// [`MemoryError::RegionTooSmall`] naming the first region that overflows, with the
 /// bytes the model needs and the region's capacity.
 pub fn check_regions(dims: &ModelDims) -> Result<(), MemoryError> {
-    check_regions_with(dims, built_in_capacity)
+    check_regions_with(dims, FeatureStorage::LAYOUT, built_in_capacity)
 }
 
 /// [`check_regions`] against other capacities, e.g. a layout file read at run time:
-/// `capacity(region)` gives a region's bytes, `None` (a region the layout lacks) counts as 0.
+/// `capacity(region)` gives a region's bytes, `None` (a region the layout lacks) counts as 0;
+/// `bev` is the storage of the BEV feature maps (that file's `camera_bev` dtype).
 ///
 /// # Errors
 /// [`MemoryError::RegionTooSmall`] naming the first region that overflows.
 pub fn check_regions_with(
     dims: &ModelDims,
+    bev: FeatureStorage,
     capacity: impl Fn(&str) -> Option<usize>,
 ) -> Result<(), MemoryError> {
-    for (region, needed_bytes) in region_needs(dims) {
+    for (region, needed_bytes) in region_needs(dims, bev) {
         let capacity_bytes = capacity(region).unwrap_or(0);
         if needed_bytes > capacity_bytes {
             return Err(MemoryError::RegionTooSmall {

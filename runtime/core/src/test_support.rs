@@ -12,6 +12,7 @@ use glam::{DVec2, Vec3};
 use crate::calibration::{Calibration, NUM_CAMERAS};
 use crate::capacity::CAN_BUS_LEN;
 use crate::engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
+use crate::features::{FeaturesMut, FeaturesRef};
 use crate::frame::{CameraImage, Frame};
 use crate::model_dims::ModelDims;
 use crate::pose::{EgoMotion, EgoPose};
@@ -31,6 +32,8 @@ pub(crate) struct FakeEngine {
     pub nan_next: bool,
     /// Make the decoder emit a finite but huge point (1e37) on the next call (then clear).
     pub huge_point_next: bool,
+    /// Factor on every camera BEV value (1; large to push it past f16's range).
+    pub bev_gain: f32,
     /// Stages run, in order (bounded; for ordering checks).
     pub calls: heapless::Vec<Stage, 64>,
 }
@@ -42,6 +45,7 @@ impl FakeEngine {
             fail_next: None,
             nan_next: false,
             huge_point_next: false,
+            bev_gain: 1.0,
             calls: heapless::Vec::new(),
         }
     }
@@ -125,20 +129,21 @@ impl Engine for FakeEngine {
         &mut self,
         query: &[f32],
         gathered: &[f32],
-        camera_bev_out: &mut [f32],
+        mut camera_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError> {
         self.enter(Stage::BevEncoder)?;
         shape(Stage::BevEncoder, self.dims.bev_len(), camera_bev_out.len())?;
-        for ((o, q), g) in camera_bev_out.iter_mut().zip(query).zip(gathered) {
-            *o = q + g;
-        }
+        shape(Stage::BevEncoder, query.len(), gathered.len())?;
+        shape(Stage::BevEncoder, query.len(), camera_bev_out.len())?;
+        let gain = self.bev_gain;
+        camera_bev_out.fill_with(|i| (query[i] + gathered[i]) * gain);
         Ok(())
     }
 
     fn encode_satellite(
         &mut self,
         crop_rgb: &[u8],
-        satellite_bev_out: &mut [f32],
+        mut satellite_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError> {
         self.enter(Stage::SatelliteEncoder)?;
         shape(
@@ -146,16 +151,14 @@ impl Engine for FakeEngine {
             self.dims.crop_bytes(),
             crop_rgb.len(),
         )?;
-        for (i, o) in satellite_bev_out.iter_mut().enumerate() {
-            *o = f32::from(crop_rgb[(i * 13) % crop_rgb.len()]) / 255.0;
-        }
+        satellite_bev_out.fill_with(|i| f32::from(crop_rgb[(i * 13) % crop_rgb.len()]) / 255.0);
         Ok(())
     }
 
     fn decode_map(
         &mut self,
-        camera_bev: &[f32],
-        satellite_bev: &[f32],
+        camera_bev: FeaturesRef<'_>,
+        satellite_bev: FeaturesRef<'_>,
         class_logits_out: &mut [f32],
         points_out: &mut [f32],
     ) -> Result<(), EngineError> {
@@ -168,8 +171,8 @@ impl Engine for FakeEngine {
         shape(Stage::MapDecoder, self.dims.points_len(), points_out.len())?;
         let n = camera_bev.len() / class_logits_out.len();
         for (j, l) in class_logits_out.iter_mut().enumerate() {
-            let cam: f32 = camera_bev[j * n..(j + 1) * n].iter().sum();
-            let sat: f32 = satellite_bev[j * n..(j + 1) * n].iter().sum();
+            let cam: f32 = camera_bev.iter().skip(j * n).take(n).sum();
+            let sat: f32 = satellite_bev.iter().skip(j * n).take(n).sum();
             *l = (cam + 2.0 * sat) / n as f32 - 1.0;
         }
         if self.nan_next {
@@ -177,8 +180,9 @@ impl Engine for FakeEngine {
             class_logits_out[0] = f32::NAN;
         }
         for (i, p) in points_out.iter_mut().enumerate() {
-            let x =
-                camera_bev[(i * 7) % camera_bev.len()] + satellite_bev[(i * 5) % camera_bev.len()];
+            let n = camera_bev.len();
+            let at = |bev: FeaturesRef<'_>, k: usize| bev.get(k % n).unwrap_or(f32::NAN);
+            let x = at(camera_bev, i * 7) + at(satellite_bev, i * 5);
             *p = x.abs().fract();
         }
         if self.huge_point_next {

@@ -52,6 +52,7 @@ use tract_nnef::prelude::*;
 
 use satmap_bundle::{Bundle, BundleError, GraphFormat, Precision};
 use satmap_core::engine::{BackendFault, Engine, EngineError, EngineErrorKind, Stage};
+use satmap_core::features::{FeaturesMut, FeaturesRef};
 use satmap_core::model_dims::ModelDims;
 
 // The load steps `satmap-translate` runs too, on the host, before it writes a stage.
@@ -283,7 +284,7 @@ impl Engine for TractEngine {
         let index =
             i64::try_from(camera).map_err(|_| r.err(EngineErrorKind::CameraIndex { camera }))?;
         r.write_input(1, &[index])?;
-        r.run(executor, &mut [value_out])
+        r.run(executor, &mut [value_out.into()])
     }
 
     fn bev_query(
@@ -294,14 +295,14 @@ impl Engine for TractEngine {
     ) -> Result<(), EngineError> {
         let (r, executor) = self.runner(Stage::BevQuery);
         r.write_input(0, can_bus)?;
-        r.run(executor, &mut [query_out, gkt_weights_out])
+        r.run(executor, &mut [query_out.into(), gkt_weights_out.into()])
     }
 
     fn bev_encode(
         &mut self,
         query: &[f32],
         gathered: &[f32],
-        camera_bev_out: &mut [f32],
+        camera_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError> {
         let (r, executor) = self.runner(Stage::BevEncoder);
         r.write_input(0, query)?;
@@ -312,7 +313,7 @@ impl Engine for TractEngine {
     fn encode_satellite(
         &mut self,
         crop_rgb: &[u8],
-        satellite_bev_out: &mut [f32],
+        satellite_bev_out: FeaturesMut<'_>,
     ) -> Result<(), EngineError> {
         let (r, executor) = self.runner(Stage::SatelliteEncoder);
         r.write_input(0, crop_rgb)?;
@@ -321,15 +322,15 @@ impl Engine for TractEngine {
 
     fn decode_map(
         &mut self,
-        camera_bev: &[f32],
-        satellite_bev: &[f32],
+        camera_bev: FeaturesRef<'_>,
+        satellite_bev: FeaturesRef<'_>,
         class_logits_out: &mut [f32],
         points_out: &mut [f32],
     ) -> Result<(), EngineError> {
         let (r, executor) = self.runner(Stage::MapDecoder);
-        r.write_input(0, camera_bev)?;
-        r.write_input(1, satellite_bev)?;
-        r.run(executor, &mut [class_logits_out, points_out])
+        r.write_features(0, camera_bev)?;
+        r.write_features(1, satellite_bev)?;
+        r.run(executor, &mut [class_logits_out.into(), points_out.into()])
     }
 }
 

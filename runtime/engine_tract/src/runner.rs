@@ -84,12 +84,46 @@ impl StageRunner {
         }
     }
 
-    /// Copy `src` into input `ix` (as `T`). The state drops its references to the inputs at the
-    /// end of every run, so the tensor is uniquely owned here.
+    /// Copy `src` into input `ix` (as `T`).
     pub(super) fn write_input<T: Datum + Copy>(
         &mut self,
         ix: usize,
         src: &[T],
+    ) -> Result<(), EngineError> {
+        self.with_input(ix, |dst: &mut [T]| {
+            if dst.len() == src.len() {
+                dst.copy_from_slice(src);
+                Ok(())
+            } else {
+                Err(EngineErrorKind::ShapeMismatch {
+                    expected: dst.len(),
+                    got: src.len(),
+                })
+            }
+        })
+    }
+
+    /// Copy the feature map `src` into input `ix`, widened to f32 (the graphs take f32).
+    pub(super) fn write_features(
+        &mut self,
+        ix: usize,
+        src: FeaturesRef<'_>,
+    ) -> Result<(), EngineError> {
+        self.with_input(ix, |dst: &mut [f32]| {
+            src.load(dst).map_err(|m| EngineErrorKind::ShapeMismatch {
+                // `load`'s map is the given slice here, the tensor the expected length.
+                expected: m.got,
+                got: m.expected,
+            })
+        })
+    }
+
+    /// `write` on input `ix` as a slice of `T`. The state drops its references to the inputs
+    /// at the end of every run, so the tensor is uniquely owned here.
+    fn with_input<T: Datum>(
+        &mut self,
+        ix: usize,
+        write: impl FnOnce(&mut [T]) -> Result<(), EngineErrorKind>,
     ) -> Result<(), EngineError> {
         let stage = self.stage;
         let err = |kind| EngineError { stage, kind };
@@ -105,21 +139,15 @@ impl StageRunner {
         let dst = view
             .as_slice_mut::<T>()
             .map_err(|_| err(EngineErrorKind::Backend(BackendFault::InputDtype)))?;
-        if dst.len() != src.len() {
-            return Err(err(EngineErrorKind::ShapeMismatch {
-                expected: dst.len(),
-                got: src.len(),
-            }));
-        }
-        dst.copy_from_slice(src);
-        Ok(())
+        write(dst).map_err(err)
     }
 
-    /// Run the stage and copy each f32 output into the matching buffer of `outs`.
+    /// Run the stage and store each f32 output into the matching buffer of `outs`, in that
+    /// buffer's storage.
     pub(super) fn run(
         &mut self,
         executor: &Executor,
-        outs: &mut [&mut [f32]],
+        outs: &mut [FeaturesMut<'_>],
     ) -> Result<(), EngineError> {
         if outs.len() != self.output_lens.len() {
             return Err(self.err(EngineErrorKind::Backend(BackendFault::OutputCount)));
@@ -165,13 +193,12 @@ impl StageRunner {
                 .try_as_plain_ram()
                 .and_then(|v| v.as_slice::<f32>())
                 .map_err(|_| self.err(EngineErrorKind::Backend(BackendFault::OutputDtype)))?;
-            if src.len() != out.len() {
-                return Err(self.err(EngineErrorKind::ShapeMismatch {
-                    expected: out.len(),
-                    got: src.len(),
-                }));
-            }
-            out.copy_from_slice(src);
+            out.store(src).map_err(|m| {
+                self.err(EngineErrorKind::ShapeMismatch {
+                    expected: m.expected,
+                    got: m.got,
+                })
+            })?;
         }
         Ok(())
     }

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use crate::MemoryLayout;
 
 impl MemoryLayout {
-    /// Rust source with one `pub const <NAME>_BYTES: usize` and `<NAME>_SHAPE` per region, the
+    /// Rust source with one `pub const <NAME>_BYTES: usize`, `<NAME>_DTYPE` and `<NAME>_SHAPE` per region, the
     /// arena sizes and the budgets: what `runtime/core/build.rs` writes to `OUT_DIR`.
     #[must_use]
     pub fn to_rust_consts(&self) -> String {
@@ -26,6 +26,8 @@ impl MemoryLayout {
                 let _ = writeln!(s, "/// `{name}`: bytes of one record.");
                 let _ = writeln!(s, "pub const {upper}_ELEM_BYTES: usize = {elem};");
             }
+            let _ = writeln!(s, "/// `{name}`: element type, as in the layout file.");
+            let _ = writeln!(s, "pub const {upper}_DTYPE: &str = {:?};", r.dtype.name());
             let _ = writeln!(s, "/// `{name}`: shape (capacity).");
             let _ = writeln!(
                 s,

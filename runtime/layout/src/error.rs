@@ -28,6 +28,28 @@ pub enum LayoutError {
         "ERROR(layout): region `{0}`: `elem_bytes` is required for dtype \"record\" and only for it"
     )]
     ElemBytes(String),
+    /// A BEV region's dtype is neither f32 nor f16.
+    #[error(
+        "ERROR(layout): region `{region}` has dtype \"{dtype}\"; the BEV feature maps are stored \
+         as \"f32\" or \"f16\""
+    )]
+    FeatureDtype {
+        /// Region name.
+        region: &'static str,
+        /// Its dtype.
+        dtype: &'static str,
+    },
+    /// The two BEV regions have different dtypes.
+    #[error(
+        "ERROR(layout): camera_bev is \"{camera_bev}\" but satellite_bev is \"{satellite_bev}\"; \
+         the decoder reads both in one storage. Give both the same dtype."
+    )]
+    FeatureDtypesDiffer {
+        /// camera_bev's dtype.
+        camera_bev: &'static str,
+        /// satellite_bev's dtype.
+        satellite_bev: &'static str,
+    },
     /// A region the runtime needs is missing.
     #[error("ERROR(layout): region `{0}` is missing; the runtime needs it")]
     MissingRegion(&'static str),
@@ -81,6 +103,8 @@ impl LayoutError {
             Self::Parse(_) => "Parse",
             Self::Bytes { .. } => "Bytes",
             Self::ElemBytes(_) => "ElemBytes",
+            Self::FeatureDtype { .. } => "FeatureDtype",
+            Self::FeatureDtypesDiffer { .. } => "FeatureDtypesDiffer",
             Self::MissingRegion(_) => "MissingRegion",
             Self::MissingBudget(_) => "MissingBudget",
             Self::ZeroStepPeriod => "ZeroStepPeriod",

@@ -52,7 +52,26 @@ impl DType {
             DType::Record => None,
         }
     }
+
+    /// The name in the file: `u8`, `f16`, `record`, ...
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            DType::U8 => "u8",
+            DType::U16 => "u16",
+            DType::F16 => "f16",
+            DType::U32 => "u32",
+            DType::F32 => "f32",
+            DType::U64 => "u64",
+            DType::Record => "record",
+        }
+    }
 }
+
+/// The regions whose storage the layout may choose (`f32`, or `f16` to halve them: the BEV
+/// feature maps, `satmap_core::features`); both must have the same dtype. Every other float
+/// region is f32.
+pub const FEATURE_STORAGE_REGIONS: [&str; 2] = ["camera_bev", "satellite_bev"];
 
 /// Who owns a region's memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
@@ -182,6 +201,7 @@ impl MemoryLayout {
                 return Err(LayoutError::MissingBudget(name));
             }
         }
+        self.check_feature_storage()?;
         for (name, r) in &self.region {
             let elem = match (r.dtype.size_bytes(), r.elem_bytes) {
                 (Some(s), None) => s,
@@ -226,6 +246,28 @@ impl MemoryLayout {
             });
         }
         Ok(())
+    }
+
+    /// The BEV regions are `f32` or `f16`, both the same.
+    fn check_feature_storage(&self) -> Result<(), LayoutError> {
+        let [camera, satellite] = FEATURE_STORAGE_REGIONS.map(|n| self.region.get(n));
+        for (name, r) in FEATURE_STORAGE_REGIONS.iter().zip([camera, satellite]) {
+            if let Some(r) = r
+                && !matches!(r.dtype, DType::F32 | DType::F16)
+            {
+                return Err(LayoutError::FeatureDtype {
+                    region: name,
+                    dtype: r.dtype.name(),
+                });
+            }
+        }
+        match (camera, satellite) {
+            (Some(c), Some(s)) if c.dtype != s.dtype => Err(LayoutError::FeatureDtypesDiffer {
+                camera_bev: c.dtype.name(),
+                satellite_bev: s.dtype.name(),
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// A region by name.

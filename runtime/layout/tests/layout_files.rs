@@ -31,6 +31,11 @@ fn repository_layout_parses_and_fits() {
     let consts = layout.to_rust_consts();
     assert!(consts.contains("pub const BEV_QUERY_BYTES: usize = 3276800;"));
     assert!(consts.contains("pub const GKT_LUT_ELEM_BYTES: usize = 733;"));
+    assert!(consts.contains("pub const CAMERA_BEV_DTYPE: &str = \"f32\";"));
+    let half = MemoryLayout::parse(&read("layouts/nano-f16-bev.toml")).unwrap();
+    let half_consts = half.to_rust_consts();
+    assert!(half_consts.contains("pub const CAMERA_BEV_DTYPE: &str = \"f16\";"));
+    assert!(half_consts.contains("pub const SATELLITE_BEV_BYTES: usize = 1638400;"));
     assert!(consts.contains("pub const STEP_BUDGET_US: u64 ="));
     let map = layout.render_map();
     for name in satmap_layout::REQUIRED_REGIONS {
@@ -44,7 +49,7 @@ type Case = (&'static str, fn(&LayoutError) -> bool);
 
 #[test]
 fn each_bad_fixture_fails_with_its_error() {
-    let cases: [Case; 10] = [
+    let cases: [Case; 12] = [
         ("bad_bytes", |e| {
             matches!(e, LayoutError::Bytes { region, declared: 368_000, computed: 368_640, .. }
                 if region == "value_features")
@@ -77,6 +82,24 @@ fn each_bad_fixture_fails_with_its_error() {
             "bad_record_without_elem_bytes",
             |e| matches!(e, LayoutError::ElemBytes(r) if r == "tile_cache"),
         ),
+        ("bad_feature_dtype", |e| {
+            matches!(
+                e,
+                LayoutError::FeatureDtype {
+                    region: "satellite_bev",
+                    dtype: "u32"
+                }
+            )
+        }),
+        ("bad_feature_dtypes_differ", |e| {
+            matches!(
+                e,
+                LayoutError::FeatureDtypesDiffer {
+                    camera_bev: "f16",
+                    satellite_bev: "f32"
+                }
+            )
+        }),
         ("bad_zero_step_period", |e| {
             matches!(e, LayoutError::ZeroStepPeriod)
         }),

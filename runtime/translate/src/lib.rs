@@ -37,6 +37,7 @@ use satmap_bundle::archive::write_archive;
 use satmap_bundle::{Bundle, BundleError, GraphFormat, MANIFEST_FILE, Precision, Trust};
 use satmap_core::MemoryError;
 use satmap_core::engine::Stage;
+use satmap_core::features::FeatureStorage;
 use satmap_core::regions::check_regions_with;
 use satmap_engine_tract::{HalfArithmetic, check_graph_io, engine_error, nnef_model, onnx_model};
 
@@ -95,14 +96,15 @@ pub fn stage_entry_name(stage: Stage) -> String {
 }
 
 /// Compile the folder bundle `bundle` to `precision` for a memory layout whose region
-/// capacities `capacity` gives (bytes by region name; the built-in layout is
-/// [`satmap_core::regions::check_regions`]'s).
+/// capacities `capacity` gives (bytes by region name) and whose BEV regions hold `bev` storage
+/// (the built-in layout is [`satmap_core::regions::check_regions`]'s).
 ///
 /// # Errors
 /// [`CompileError`] naming the stage, tensor or region that failed.
 pub fn compile(
     bundle: &Bundle,
     precision: Precision,
+    bev: FeatureStorage,
     capacity: impl Fn(&str) -> Option<usize>,
 ) -> Result<Compiled, CompileError> {
     if bundle.format() != GraphFormat::Onnx {
@@ -125,7 +127,7 @@ pub fn compile(
         }
         Precision::F16 => return Err(refuse("a folder bundle is f32 or int8")),
     }
-    check_regions_with(bundle.dims(), capacity).map_err(CompileError::Layout)?;
+    check_regions_with(bundle.dims(), bev, capacity).map_err(CompileError::Layout)?;
     let core_only = tract_nnef::nnef();
     let mut nnef_tars = Vec::with_capacity(Stage::ALL.len());
     let mut stages = Vec::with_capacity(Stage::ALL.len());

@@ -17,17 +17,18 @@ pub const SCORE_TOL: f32 = 1e-5;
 /// The CAN-bus vector against the reference.
 pub const CAN_BUS_TOL: f32 = 1e-6;
 
-/// `map`'s stage buffers in [`STAGE_BUFFERS`]' order.
-fn buffers<S: SatelliteSource>(map: &SatMap<TractEngine, S>) -> [&[f32]; 8] {
+/// `map`'s stage buffers in [`STAGE_BUFFERS`]' order, the BEVs widened from their storage.
+fn buffers<S: SatelliteSource>(map: &SatMap<TractEngine, S>) -> [Vec<f32>; 8] {
+    let b = map.buffers();
     [
-        map.buffers().value(),
-        map.buffers().query(),
-        map.buffers().weights(),
-        map.buffers().gathered(),
-        map.buffers().camera_bev(),
-        map.buffers().satellite_bev(),
-        map.buffers().logits(),
-        map.buffers().points(),
+        b.value().to_vec(),
+        b.query().to_vec(),
+        b.weights().to_vec(),
+        b.gathered().to_vec(),
+        b.camera_bev().iter().collect(),
+        b.satellite_bev().iter().collect(),
+        b.logits().to_vec(),
+        b.points().to_vec(),
     ]
 }
 
@@ -74,7 +75,7 @@ pub fn check_stages<S: SatelliteSource>(
     // The gather-sum is fed tract's weights and values here, so it inherits their 1e-4;
     // bit-exactness on identical inputs is shown by the LUT kernel tests.
     for (name, got) in STAGE_BUFFERS.into_iter().zip(buffers(map)) {
-        let d = max_abs_diff(got, &g.f32s(name));
+        let d = max_abs_diff(&got, &g.f32s(name));
         assert!(
             d <= STAGE_TOL,
             "{what} {name}: max abs diff {d:e} > {STAGE_TOL:e}"
@@ -157,7 +158,7 @@ pub fn degraded_frame_matches(engine: impl Fn() -> TractEngine, what: &str) {
     let out = map.step(&f.frame(1, w, h)).unwrap().clone();
     assert!(out.health.degraded);
     assert_eq!(out.health.satellite, SatellitePrior::Missing);
-    assert!(map.buffers().satellite_bev().iter().all(|&v| v == 0.0));
+    assert!(map.buffers().satellite_bev().iter().all(|v| v == 0.0));
     let d = max_abs_diff(
         map.buffers().logits(),
         &f.golden.f32s("degraded_class_logits"),

@@ -3,6 +3,7 @@
 //! (`examples/stage_insns.rs`, `targets/insn_counts.sh`) runs under the emulator.
 
 use satmap_runtime::engine_tract::TractEngine;
+use satmap_runtime::features::{FeaturesMut, FeaturesRef};
 use satmap_runtime::{Engine, EngineError, Stage};
 
 use crate::golden::{Golden, bundle_dir};
@@ -85,11 +86,17 @@ impl StageOutputs {
         match stage {
             Stage::ImageEncoder => engine.encode_image(0, &r.image, &mut self.value),
             Stage::BevQuery => engine.bev_query(&r.can_bus, &mut self.query, &mut self.weights),
-            Stage::BevEncoder => engine.bev_encode(&r.query, &r.gathered, &mut self.camera_bev),
-            Stage::SatelliteEncoder => engine.encode_satellite(&r.crop, &mut self.satellite_bev),
+            Stage::BevEncoder => engine.bev_encode(
+                &r.query,
+                &r.gathered,
+                FeaturesMut::F32(&mut self.camera_bev),
+            ),
+            Stage::SatelliteEncoder => {
+                engine.encode_satellite(&r.crop, FeaturesMut::F32(&mut self.satellite_bev))
+            }
             Stage::MapDecoder => engine.decode_map(
-                &r.camera_bev,
-                &r.satellite_bev,
+                FeaturesRef::F32(&r.camera_bev),
+                FeaturesRef::F32(&r.satellite_bev),
                 &mut self.logits,
                 &mut self.points,
             ),

@@ -10,6 +10,7 @@ use crate::buffers::MemoryError;
 use crate::buffers::Slab;
 use crate::calibration::NUM_CAMERAS;
 use crate::capacity::CAN_BUS_LEN;
+use crate::features::{FeatureSlab, FeatureStorage, FeaturesRef};
 use crate::model_dims::ModelDims;
 
 /// The pipeline's intermediate tensors of the last attempted step, row-major, sized from the
@@ -26,11 +27,11 @@ pub struct StepBuffers {
     /// `[Q, D]`.
     pub(super) gathered: Slab<f32>,
     /// `[bev_h, bev_w, D]`.
-    pub(super) camera_bev: Slab<f32>,
+    pub(super) camera_bev: FeatureSlab,
     /// `[sat_h, sat_w, 3]`.
     pub(super) crop: Slab<u8>,
     /// `[bev_h, bev_w, D]`.
-    pub(super) satellite_bev: Slab<f32>,
+    pub(super) satellite_bev: FeatureSlab,
     /// `[num_vec, 3]`.
     pub(super) logits: Slab<f32>,
     /// `[num_vec, num_pts, 2]`.
@@ -38,17 +39,17 @@ pub struct StepBuffers {
 }
 
 impl StepBuffers {
-    /// Reserve every buffer for `dims`, zeroed.
-    pub(super) fn new(dims: &ModelDims) -> Result<Self, MemoryError> {
+    /// Reserve every buffer for `dims`, zeroed, the BEVs in `bev` storage.
+    pub(super) fn new(dims: &ModelDims, bev: FeatureStorage) -> Result<Self, MemoryError> {
         Ok(Self {
             can_bus: [0.0; CAN_BUS_LEN],
             value: Slab::zeroed(NUM_CAMERAS * dims.value_len())?,
             query: Slab::zeroed(dims.bev_len())?,
             weights: Slab::zeroed(dims.weights_len())?,
             gathered: Slab::zeroed(dims.bev_len())?,
-            camera_bev: Slab::zeroed(dims.bev_len())?,
+            camera_bev: FeatureSlab::zeroed(dims.bev_len(), bev)?,
             crop: Slab::zeroed(dims.crop_bytes())?,
-            satellite_bev: Slab::zeroed(dims.bev_len())?,
+            satellite_bev: FeatureSlab::zeroed(dims.bev_len(), bev)?,
             logits: Slab::zeroed(dims.logits_len())?,
             points: Slab::zeroed(dims.points_len())?,
         })
@@ -62,9 +63,9 @@ impl StepBuffers {
             query: Slab::placed(p.bev_query),
             weights: Slab::placed(p.gkt_weights),
             gathered: Slab::placed(p.gathered),
-            camera_bev: Slab::placed(p.camera_bev),
+            camera_bev: FeatureSlab::placed(p.camera_bev),
             crop: Slab::placed(p.satellite_crop),
-            satellite_bev: Slab::placed(p.satellite_bev),
+            satellite_bev: FeatureSlab::placed(p.satellite_bev),
             logits: Slab::placed(p.class_logits),
             points: Slab::placed(p.points),
         }
@@ -100,10 +101,10 @@ impl StepBuffers {
         &self.gathered
     }
 
-    /// Camera BEV `[bev_h, bev_w, D]` of the last attempted step.
+    /// Camera BEV `[bev_h, bev_w, D]` of the last attempted step, in the runtime's storage.
     #[must_use]
-    pub fn camera_bev(&self) -> &[f32] {
-        &self.camera_bev
+    pub fn camera_bev(&self) -> FeaturesRef<'_> {
+        self.camera_bev.as_ref()
     }
 
     /// Satellite crop `[sat_h, sat_w, 3]` of the last attempted step.
@@ -112,10 +113,17 @@ impl StepBuffers {
         &self.crop
     }
 
-    /// Satellite BEV `[bev_h, bev_w, D]` of the last attempted step (zeros when degraded).
+    /// Satellite BEV `[bev_h, bev_w, D]` of the last attempted step (zeros when degraded), in
+    /// the runtime's storage.
     #[must_use]
-    pub fn satellite_bev(&self) -> &[f32] {
-        &self.satellite_bev
+    pub fn satellite_bev(&self) -> FeaturesRef<'_> {
+        self.satellite_bev.as_ref()
+    }
+
+    /// Storage of the two BEV feature maps.
+    #[must_use]
+    pub fn bev_storage(&self) -> FeatureStorage {
+        self.camera_bev.as_ref().storage()
     }
 
     /// Class logits `[num_vec, 3]` of the last attempted step.

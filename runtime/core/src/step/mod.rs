@@ -27,6 +27,7 @@ use staged::{ImageSeen, Pending, Slices, changed_part};
 use crate::calibration::Calibration;
 use crate::decode::decode;
 use crate::engine::Engine;
+use crate::features::FeatureStorage;
 use crate::frame::{Frame, FrameLimits, LastStep, check_frame};
 use crate::gkt::Lut;
 use crate::map_frame::{self, Health, MapFrame, SatellitePrior};
@@ -75,9 +76,32 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         satellite: S,
         limits: FrameLimits,
     ) -> Result<Self, InitError> {
-        let dims = checked_dims(&engine, &limits)?;
+        Self::with_bev_storage(
+            engine,
+            calibration,
+            satellite,
+            limits,
+            FeatureStorage::LAYOUT,
+        )
+    }
+
+    /// As [`SatMap::with_limits`], with the two BEV feature maps reserved in `bev` storage
+    /// instead of the layout's ([`FeatureStorage::LAYOUT`]): to compare both storages in one
+    /// build. They must fit the layout's regions in that storage (f32 BEVs do not fit a layout
+    /// that gives them f16).
+    ///
+    /// # Errors
+    /// As [`SatMap::with_limits`].
+    pub fn with_bev_storage(
+        engine: E,
+        calibration: &Calibration,
+        satellite: S,
+        limits: FrameLimits,
+        bev: FeatureStorage,
+    ) -> Result<Self, InitError> {
+        let dims = checked_dims(&engine, &limits, bev)?;
         let lut = Lut::new(&dims, calibration)?;
-        let buffers = StepBuffers::new(&dims)?;
+        let buffers = StepBuffers::new(&dims, bev)?;
         Ok(Self::assemble(
             engine, satellite, dims, lut, buffers, limits,
         ))
@@ -98,7 +122,7 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
         limits: FrameLimits,
         regions: RuntimeRegions,
     ) -> Result<Self, InitError> {
-        let dims = checked_dims(&engine, &limits)?;
+        let dims = checked_dims(&engine, &limits, FeatureStorage::LAYOUT)?;
         let (step, lut) = regions.split(&dims)?;
         let lut = Lut::placed(&dims, calibration, lut.queries, lut.indices, lut.count)?;
         let buffers = StepBuffers::placed(step);
@@ -359,15 +383,21 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
 }
 
 /// The checks both constructors make before any buffer exists: the limits, the engine's
-/// dimensions and whether they fit the layout's regions.
-fn checked_dims<E: Engine>(engine: &E, limits: &FrameLimits) -> Result<ModelDims, InitError> {
+/// dimensions and whether they fit the layout's regions with the BEVs in `bev` storage.
+fn checked_dims<E: Engine>(
+    engine: &E,
+    limits: &FrameLimits,
+    bev: FeatureStorage,
+) -> Result<ModelDims, InitError> {
     limits.validate()?;
     let dims = engine.dims().clone();
     dims.validate()?;
-    crate::regions::check_regions(&dims)?;
+    crate::regions::check_regions_with(&dims, bev, crate::regions::built_in_capacity)?;
     Ok(dims)
 }
 
+#[cfg(test)]
+mod bev_storage_tests;
 #[cfg(test)]
 mod changed_frame_tests;
 #[cfg(test)]

@@ -6,6 +6,7 @@ use super::staged::Pending;
 use super::{MAX_NORMALISED_POINT, SatMap, StepError, StepSlice};
 use crate::can_bus::can_bus;
 use crate::engine::Engine;
+use crate::features::FeaturesRef;
 use crate::frame::Frame;
 use crate::gkt::gather_sum;
 use crate::map_frame::SatellitePrior;
@@ -58,8 +59,8 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
             }
             StepSlice::BevEncoder => {
                 self.engine
-                    .bev_encode(&b.query, &b.gathered, &mut b.camera_bev)?;
-                finite(slice, &[&b.camera_bev])?;
+                    .bev_encode(&b.query, &b.gathered, b.camera_bev.as_mut())?;
+                finite_features(slice, b.camera_bev.as_ref())?;
             }
             StepSlice::Satellite => {
                 let spec = self.dims.crop_spec();
@@ -73,18 +74,18 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
                     Coverage::Corrupt => (SatellitePrior::Corrupt, true),
                 };
                 if degraded {
-                    b.satellite_bev.fill(0.0);
+                    b.satellite_bev.as_mut().fill_zero();
                 } else {
                     self.engine
-                        .encode_satellite(&b.crop, &mut b.satellite_bev)?;
-                    finite(slice, &[&b.satellite_bev])?;
+                        .encode_satellite(&b.crop, b.satellite_bev.as_mut())?;
+                    finite_features(slice, b.satellite_bev.as_ref())?;
                 }
                 (p.prior, p.degraded) = (prior, degraded);
             }
             StepSlice::MapDecoder => {
                 self.engine.decode_map(
-                    &b.camera_bev,
-                    &b.satellite_bev,
+                    b.camera_bev.as_ref(),
+                    b.satellite_bev.as_ref(),
                     &mut b.logits,
                     &mut b.points,
                 )?;
@@ -106,6 +107,16 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
 /// the BEV non-finite and still decodes to a map marked healthy).
 fn finite(slice: StepSlice, outputs: &[&[f32]]) -> Result<(), StepError> {
     if outputs.iter().all(|o| o.iter().all(|v| v.is_finite())) {
+        Ok(())
+    } else {
+        Err(StepError::NonFiniteOutput { slice })
+    }
+}
+
+/// [`finite`] for a BEV feature map: in f16 storage an f32 output beyond half's range was stored
+/// as infinity, so this also refuses a BEV the storage could not hold.
+fn finite_features(slice: StepSlice, features: FeaturesRef<'_>) -> Result<(), StepError> {
+    if features.all_finite() {
         Ok(())
     } else {
         Err(StepError::NonFiniteOutput { slice })

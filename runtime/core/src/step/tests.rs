@@ -295,7 +295,7 @@ fn degraded_mode_feeds_zeros_and_flags_health() {
     let out = none.step(&images.frame(1)).unwrap().clone();
     assert_eq!(out.health.satellite, SatellitePrior::Missing);
     assert!(out.health.degraded);
-    assert!(none.buffers().satellite_bev().iter().all(|&v| v == 0.0));
+    assert!(none.buffers().satellite_bev().iter().all(|v| v == 0.0));
     assert!(!none.engine().calls.contains(&Stage::SatelliteEncoder));
 
     let mut corrupt = SatMap::new(

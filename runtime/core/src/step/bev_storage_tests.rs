@@ -1,0 +1,152 @@
+//! The BEV feature maps in f16 storage over the engine double: the stored values are the f32
+//! run's rounded once (bit for bit), a step still allocates nothing, a BEV beyond half's range is
+//! refused, and a storage that does not fit the layout's regions is refused by region.
+
+use alloc::vec::Vec;
+
+use half::f16;
+
+use super::*;
+use crate::buffers::MemoryError;
+use crate::capacity::layout;
+use crate::engine::Engine;
+use crate::features::{FeaturesMut, FeaturesRef};
+use crate::satellite::FixedCrop;
+use crate::test_support::{FakeEngine, Images, count_allocations, crop, nuscenes_like};
+
+fn runtime(
+    crop: &[u8],
+    bev: FeatureStorage,
+) -> Result<SatMap<FakeEngine, FixedCrop<'_>>, InitError> {
+    SatMap::with_bev_storage(
+        FakeEngine::new(ModelDims::test_config()),
+        &nuscenes_like(),
+        FixedCrop(crop),
+        FrameLimits::DEFAULT,
+        bev,
+    )
+}
+
+fn bits(bev: FeaturesRef<'_>) -> Vec<u16> {
+    bev.iter().map(|v| f16::from_f32(v).to_bits()).collect()
+}
+
+fn rounded(wide: &[f32]) -> Vec<u16> {
+    wide.iter().map(|&v| f16::from_f32(v).to_bits()).collect()
+}
+
+#[test]
+fn f16_storage_holds_the_f32_outputs_rounded_once_and_steps_without_allocating() {
+    let dims = ModelDims::test_config();
+    let c = crop(&dims);
+    let images = Images::new(&dims, 8);
+    let mut half = runtime(&c, FeatureStorage::F16).unwrap();
+    assert_eq!(half.buffers().bev_storage(), FeatureStorage::F16);
+    let frames: Vec<_> = (1..=3).map(|s| images.frame(s)).collect();
+    let (maps, allocations) = count_allocations(|| {
+        frames
+            .iter()
+            .map(|f| half.step(f).map(|m| m.digest))
+            .collect::<heapless::Vec<_, 3>>()
+    });
+    // The one heapless vector of results lives on the stack: the steps allocated nothing.
+    assert_eq!(allocations, 0);
+    assert!(maps.iter().all(Result::is_ok));
+    // The f32 outputs of the same stage inputs (storage-independent buffers of the last step),
+    // from the same deterministic engine.
+    let b = half.buffers();
+    let mut engine = FakeEngine::new(dims.clone());
+    let mut camera = alloc::vec![0f32; dims.bev_len()];
+    let mut satellite = alloc::vec![0f32; dims.bev_len()];
+    engine
+        .bev_encode(b.query(), b.gathered(), FeaturesMut::F32(&mut camera))
+        .unwrap();
+    engine
+        .encode_satellite(b.crop(), FeaturesMut::F32(&mut satellite))
+        .unwrap();
+    assert_eq!(bits(b.camera_bev()), rounded(&camera));
+    assert_eq!(bits(b.satellite_bev()), rounded(&satellite));
+    // The rounding is visible (the double's BEV is not made of halves already) and within half
+    // an f16 ulp, relative.
+    assert!(b.camera_bev().iter().zip(&camera).any(|(h, &w)| h != w));
+    let worst = b
+        .camera_bev()
+        .iter()
+        .zip(&camera)
+        .map(|(h, &w)| ((h - w) / w.abs().max(f32::MIN_POSITIVE)).abs())
+        .fold(0f32, f32::max);
+    assert!(worst <= 2f32.powi(-11), "relative rounding {worst}");
+    // A runtime in f32 storage, where the layout gives the BEVs f32, publishes from unrounded
+    // BEVs: the same buffers, the f32 bits.
+    if FeatureStorage::LAYOUT == FeatureStorage::F32 {
+        let mut wide = runtime(&c, FeatureStorage::F32).unwrap();
+        for f in &frames {
+            wide.step(f).unwrap();
+        }
+        assert_eq!(
+            wide.buffers().camera_bev().iter().collect::<Vec<_>>(),
+            camera
+        );
+    } else {
+        assert!(runtime(&c, FeatureStorage::F32).is_err());
+    }
+}
+
+#[test]
+fn a_bev_beyond_half_range_is_a_non_finite_output_in_f16_and_passes_in_f32() {
+    let dims = ModelDims::test_config();
+    let c = crop(&dims);
+    let images = Images::new(&dims, 8);
+    let mut half = runtime(&c, FeatureStorage::F16).unwrap();
+    half.engine_mut().bev_gain = 1e6;
+    assert_eq!(
+        half.step(&images.frame(1)).map(|m| m.digest),
+        Err(StepError::NonFiniteOutput {
+            slice: StepSlice::BevEncoder
+        })
+    );
+    // The runtime stays usable: the next frame in range steps.
+    half.engine_mut().bev_gain = 1.0;
+    assert!(half.step(&images.frame(2)).is_ok());
+    match runtime(&c, FeatureStorage::F32) {
+        Ok(mut wide) => {
+            wide.engine_mut().bev_gain = 1e6;
+            assert!(wide.step(&images.frame(1)).is_ok());
+        }
+        // Only a layout that gives the BEVs f16 cannot hold them in f32.
+        Err(_) => assert_eq!(FeatureStorage::LAYOUT, FeatureStorage::F16),
+    }
+}
+
+#[test]
+fn storage_is_checked_against_the_layout_regions() {
+    let c = crop(&ModelDims::test_config());
+    // The layout's own storage always fits the test model; f16 fits any layout f32 fits.
+    assert!(runtime(&c, FeatureStorage::LAYOUT).is_ok());
+    assert!(runtime(&c, FeatureStorage::F16).is_ok());
+    // A layout whose BEV regions hold exactly the f16 maps (every other region roomy): f16
+    // fits, f32 is refused naming the first BEV region with both sizes.
+    let dims = ModelDims::test_config();
+    let half_bytes = dims.bev_len() * 2;
+    let capacity = |region: &str| {
+        Some(if region.ends_with("_bev") {
+            half_bytes
+        } else {
+            usize::MAX
+        })
+    };
+    assert_eq!(
+        crate::regions::check_regions_with(&dims, FeatureStorage::F16, capacity),
+        Ok(())
+    );
+    assert_eq!(
+        crate::regions::check_regions_with(&dims, FeatureStorage::F32, capacity),
+        Err(MemoryError::RegionTooSmall {
+            region: "camera_bev",
+            needed_bytes: 2 * half_bytes,
+            capacity_bytes: half_bytes,
+        })
+    );
+    // The built-in layout's BEV regions are at least the f16 maps of the layout's config.
+    assert!(layout::CAMERA_BEV_BYTES >= half_bytes && layout::SATELLITE_BEV_BYTES >= half_bytes);
+}
