@@ -28,6 +28,7 @@ fn a_replay_has_the_same_step_digests_on_one_and_two_threads() {
             show_progress: false,
             pack_compression: TileCompression::Raw,
             threads,
+            bev_storage: satmap_runtime::FeatureStorage::LAYOUT,
         };
         let report = replay(&cfg, None).unwrap().report;
         let steps: Vec<u64> = report.steps.iter().map(|s| s.digest).collect();

@@ -16,6 +16,7 @@ use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use satmap_runtime::FeatureStorage;
 use satmap_runtime::capacity::layout;
 
 use crate::arena::ArenaAllocator;
@@ -120,6 +121,16 @@ pub struct Args {
     /// count).
     #[arg(long, default_value = "1")]
     pub threads: NonZeroUsize,
+    /// Storage of the runtime's two BEV feature maps, `f32` or `f16` (default: the layout's,
+    /// `f32` in memory_layout.toml): `f16` halves them (6.25 -> 3.1 MiB at nano's size). With
+    /// `--deviation-from`, the reference runs in f32 where the layout holds it, so the figure
+    /// is the storage's effect (with the same bundle) or both precisions' (with another).
+    #[arg(long, value_parser = parse_bev_storage)]
+    pub bev_storage: Option<FeatureStorage>,
+}
+
+fn parse_bev_storage(text: &str) -> Result<FeatureStorage, String> {
+    FeatureStorage::from_name(text).ok_or_else(|| format!("`{text}`: give f32 or f16"))
 }
 
 fn parse_crop(text: &str) -> Result<CropSpec, String> {
@@ -241,6 +252,7 @@ pub fn run(
         max_degraded_share: args.max_degraded_share,
         pack_compression: args.pack_codec.compression(args.jpeg_quality),
         threads: args.threads,
+        bev_storage: args.bev_storage.unwrap_or(FeatureStorage::LAYOUT),
     };
     if let Some(pack_path) = &args.satellite_only {
         return run_satellite_only(args, pack_path, args.drive_hz);
@@ -296,9 +308,13 @@ fn print_deviation(
     reference: &Path,
     outcome: &crate::harness::Replay,
 ) -> Result<()> {
+    // The reference in the layout's BEV storage: f32 where the layout holds it (a layout that
+    // gives the BEVs f16 holds nothing else).
+    let ours_storage = cfg.bev_storage;
     let cfg = ReplayConfig {
         bundle_dir: reference.to_path_buf(),
         show_progress: false,
+        bev_storage: FeatureStorage::LAYOUT,
         ..cfg.clone()
     };
     let base = replay(&cfg, None)?;
@@ -311,9 +327,11 @@ fn print_deviation(
     let (ours, theirs) = (map_of(outcome), map_of(&base));
     let d = crate::eval::deviation::deviation(&base.maps, &outcome.maps);
     println!(
-        "deviation from {}: {} steps, {} elements; kept {} (mean Chamfer {:.4} m, max {:.4} m), \
-         class changed {}, left the top-k {} ({:.2}% changed)",
+        "deviation from {} (BEV maps {} here, {} there): {} steps, {} elements; kept {} (mean \
+         Chamfer {:.4} m, max {:.4} m), class changed {}, left the top-k {} ({:.2}% changed)",
         reference.display(),
+        ours_storage.name(),
+        cfg.bev_storage.name(),
         d.steps,
         d.elements,
         d.kept,

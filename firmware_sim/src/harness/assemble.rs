@@ -131,6 +131,7 @@ pub(super) fn assemble(m: Measured<'_>) -> Report {
             graph_engine_bytes: a.after_engine.current_bytes - a.before_engine.current_bytes,
             runtime_regions_bytes: a.after_init.current_bytes - a.after_engine.current_bytes,
             layout_runtime_bytes: layout_runtime_bytes(),
+            bev_storage: m.cfg.bev_storage.name(),
             step_scratch: StepScratchReport {
                 capacity_bytes: a.end.step_scratch.capacity_bytes,
                 rehearsal_peak_bytes: a.rehearsal.step_scratch_peak_bytes,

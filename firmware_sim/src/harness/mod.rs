@@ -44,6 +44,7 @@ pub mod world_imagery;
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
 
+use satmap_runtime::FeatureStorage;
 use satmap_runtime::satellite::CropSpec;
 
 pub use assemble::{bundle_config_name, layout_runtime_bytes};
@@ -104,6 +105,9 @@ pub struct ReplayConfig {
     /// Threads the graph engine runs on (`TractEngine::set_threads`; the maps do not depend on
     /// it).
     pub threads: NonZeroUsize,
+    /// Storage of the runtime's two BEV feature maps (`SatMap::with_bev_storage`): the layout's
+    /// ([`FeatureStorage::LAYOUT`]) unless a run compares storages.
+    pub bev_storage: FeatureStorage,
 }
 
 impl ReplayConfig {
@@ -125,6 +129,7 @@ impl ReplayConfig {
             show_progress: false,
             pack_compression: TileCompression::Raw,
             threads: NonZeroUsize::MIN,
+            bev_storage: FeatureStorage::LAYOUT,
         }
     }
 }

@@ -13,7 +13,7 @@ use satmap_runtime::frame::{CameraImage, CameraState, Frame, FrameLimits};
 use satmap_runtime::geo::{EnuFrame, Geodetic};
 use satmap_runtime::map_frame::MapFrame;
 use satmap_runtime::pose::{EgoMotion, EgoPose};
-use satmap_runtime::regions::check_regions;
+use satmap_runtime::regions::{built_in_capacity, check_regions_with};
 use satmap_runtime::route_pack::{PackSource, RoutePack};
 use satmap_runtime::satellite::CropSpec;
 use satmap_runtime::step::SatMap;
@@ -186,7 +186,7 @@ pub fn replay_with(
             message: e.to_string(),
         })?;
         // Refuse a model that does not fit the memory map before loading anything.
-        check_regions(bundle.dims())?;
+        check_regions_with(bundle.dims(), cfg.bev_storage, built_in_capacity)?;
         let d = bundle.dims();
         let (source, anchor, pack_bytes) = open_scenario(cfg, d.image_w, d.image_h)?;
         if pack_bytes.len() > layout::ROUTE_PACK_BYTES {
@@ -245,7 +245,13 @@ pub fn replay_with(
             .max(period_us.saturating_mul(2)),
         ..FrameLimits::DEFAULT
     };
-    let mut satmap = SatMap::with_limits(engine, source.calibration(), satellite, limits)?;
+    let mut satmap = SatMap::with_bev_storage(
+        engine,
+        source.calibration(),
+        satellite,
+        limits,
+        cfg.bev_storage,
+    )?;
     let after_init = stats_of(alloc);
 
     // Host-side buffers, reserved before the loop.

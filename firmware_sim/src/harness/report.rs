@@ -82,6 +82,8 @@ pub struct ArenaReport {
     pub runtime_regions_bytes: usize,
     /// Sum of the runtime-owned regions in `memory_layout.toml` (capacity).
     pub layout_runtime_bytes: usize,
+    /// Storage of the two BEV feature maps (`f32` or `f16`), part of `runtime_regions_bytes`.
+    pub bev_storage: &'static str,
     /// The per-step scratch region.
     pub step_scratch: StepScratchReport,
 }

@@ -75,9 +75,11 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "  runtime regions  {} bytes ({:.1} MiB) reserved by SatMap::new (layout capacity {})",
+            "  runtime regions  {} bytes ({:.1} MiB) reserved by SatMap::new, BEV maps {} \
+             (layout capacity {})",
             a.runtime_regions_bytes,
             mib(a.runtime_regions_bytes),
+            a.bev_storage,
             a.layout_runtime_bytes
         );
         let sc = &a.step_scratch;

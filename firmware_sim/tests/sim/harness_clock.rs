@@ -20,6 +20,7 @@ fn config(rate_hz: f64, frames: usize) -> ReplayConfig {
         max_degraded_share: satmap_sim::harness::DEFAULT_MAX_DEGRADED_SHARE,
         pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
         threads: std::num::NonZeroUsize::MIN,
+        bev_storage: satmap_runtime::FeatureStorage::LAYOUT,
     }
 }
 

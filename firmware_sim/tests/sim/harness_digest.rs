@@ -19,6 +19,7 @@ fn config(seed: u64) -> ReplayConfig {
         max_degraded_share: satmap_sim::harness::DEFAULT_MAX_DEGRADED_SHARE,
         pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
         threads: std::num::NonZeroUsize::MIN,
+        bev_storage: satmap_runtime::FeatureStorage::LAYOUT,
     }
 }
 

@@ -31,6 +31,7 @@ fn default_bundle_maps_a_held_out_drive_above_the_bar() {
         max_degraded_share: satmap_sim::harness::DEFAULT_MAX_DEGRADED_SHARE,
         pack_compression: satmap_sim::route_pack_builder::TileCompression::Raw,
         threads: std::num::NonZeroUsize::MIN,
+        bev_storage: satmap_runtime::FeatureStorage::LAYOUT,
     };
     let report = replay(&config, None).expect("replay runs").report;
     let quality = report.map_quality.expect("a synthetic drive is scored");

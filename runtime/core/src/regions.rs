@@ -54,8 +54,10 @@ pub fn region_needs(dims: &ModelDims, bev: FeatureStorage) -> [(&'static str, us
     core::array::from_fn(|i| (MODEL_REGIONS[i], needs[i]))
 }
 
-/// Capacity of a model-dependent region in the layout this build was generated from.
-pub(crate) fn built_in_capacity(region: &str) -> Option<usize> {
+/// Capacity of a model-dependent region in the layout this build was generated from, bytes
+/// (`None` for a region that does not scale with the model).
+#[must_use]
+pub fn built_in_capacity(region: &str) -> Option<usize> {
     Some(match region {
         "camera_images" => layout::CAMERA_IMAGES_BYTES,
         "value_features" => layout::VALUE_FEATURES_BYTES,

@@ -76,20 +76,16 @@ fn f16_storage_holds_the_f32_outputs_rounded_once_and_steps_without_allocating()
         .map(|(h, &w)| ((h - w) / w.abs().max(f32::MIN_POSITIVE)).abs())
         .fold(0f32, f32::max);
     assert!(worst <= 2f32.powi(-11), "relative rounding {worst}");
-    // A runtime in f32 storage, where the layout gives the BEVs f32, publishes from unrounded
-    // BEVs: the same buffers, the f32 bits.
-    if FeatureStorage::LAYOUT == FeatureStorage::F32 {
-        let mut wide = runtime(&c, FeatureStorage::F32).unwrap();
-        for f in &frames {
-            wide.step(f).unwrap();
-        }
-        assert_eq!(
-            wide.buffers().camera_bev().iter().collect::<Vec<_>>(),
-            camera
-        );
-    } else {
-        assert!(runtime(&c, FeatureStorage::F32).is_err());
+    // A runtime in f32 storage publishes from the unrounded BEVs: the same buffers, the f32
+    // bits. (The test model's BEVs, D = 32, fit in f32 even where the layout gives nano's f16.)
+    let mut wide = runtime(&c, FeatureStorage::F32).unwrap();
+    for f in &frames {
+        wide.step(f).unwrap();
     }
+    assert_eq!(
+        wide.buffers().camera_bev().iter().collect::<Vec<_>>(),
+        camera
+    );
 }
 
 #[test]
@@ -108,14 +104,9 @@ fn a_bev_beyond_half_range_is_a_non_finite_output_in_f16_and_passes_in_f32() {
     // The runtime stays usable: the next frame in range steps.
     half.engine_mut().bev_gain = 1.0;
     assert!(half.step(&images.frame(2)).is_ok());
-    match runtime(&c, FeatureStorage::F32) {
-        Ok(mut wide) => {
-            wide.engine_mut().bev_gain = 1e6;
-            assert!(wide.step(&images.frame(1)).is_ok());
-        }
-        // Only a layout that gives the BEVs f16 cannot hold them in f32.
-        Err(_) => assert_eq!(FeatureStorage::LAYOUT, FeatureStorage::F16),
-    }
+    let mut wide = runtime(&c, FeatureStorage::F32).unwrap();
+    wide.engine_mut().bev_gain = 1e6;
+    assert!(wide.step(&images.frame(1)).is_ok());
 }
 
 #[test]
@@ -149,4 +140,83 @@ fn storage_is_checked_against_the_layout_regions() {
     );
     // The built-in layout's BEV regions are at least the f16 maps of the layout's config.
     assert!(layout::CAMERA_BEV_BYTES >= half_bytes && layout::SATELLITE_BEV_BYTES >= half_bytes);
+}
+
+/// `len` zeroed bytes at a `REGION_ALIGN` boundary, leaked (standing in for a linker script's
+/// static section).
+fn region(len: usize) -> &'static mut [u8] {
+    use crate::placement::REGION_ALIGN;
+    let v: &'static mut [u8] = Vec::leak(alloc::vec![0u8; len + REGION_ALIGN]);
+    let skip = v.as_ptr().align_offset(REGION_ALIGN);
+    &mut v[skip..skip + len]
+}
+
+#[test]
+fn placed_regions_hold_the_bevs_in_the_layout_storage_and_step_like_the_heap() {
+    use crate::placement::{REGIONS, RuntimeRegions};
+    let dims = ModelDims::test_config();
+    let c = crop(&dims);
+    let images = Images::new(&dims, 8);
+    let r = |name: &str| region(REGIONS.iter().find(|s| s.name == name).unwrap().bytes);
+    let mut placed = SatMap::in_regions(
+        FakeEngine::new(dims.clone()),
+        &nuscenes_like(),
+        FixedCrop(&c),
+        FrameLimits::DEFAULT,
+        RuntimeRegions {
+            value_features: r("value_features"),
+            gkt_lut: r("gkt_lut"),
+            bev_query: r("bev_query"),
+            gkt_weights: r("gkt_weights"),
+            gathered: r("gathered"),
+            camera_bev: r("camera_bev"),
+            satellite_crop: r("satellite_crop"),
+            satellite_bev: r("satellite_bev"),
+            class_logits: r("class_logits"),
+            points: r("points"),
+        },
+    )
+    .unwrap();
+    assert_eq!(placed.buffers().bev_storage(), FeatureStorage::LAYOUT);
+    let mut heap = runtime(&c, FeatureStorage::LAYOUT).unwrap();
+    for s in 1..=3 {
+        let f = images.frame(s);
+        assert_eq!(placed.step(&f).unwrap(), heap.step(&f).unwrap());
+    }
+    assert_eq!(
+        bits(placed.buffers().camera_bev()),
+        bits(heap.buffers().camera_bev())
+    );
+    // A BEV region one element short of the layout's storage is refused by name.
+    let short = REGIONS
+        .iter()
+        .find(|s| s.name == "camera_bev")
+        .unwrap()
+        .bytes
+        - FeatureStorage::LAYOUT.elem_bytes();
+    let refused = SatMap::in_regions(
+        FakeEngine::new(dims),
+        &nuscenes_like(),
+        FixedCrop(&c),
+        FrameLimits::DEFAULT,
+        RuntimeRegions {
+            value_features: r("value_features"),
+            gkt_lut: r("gkt_lut"),
+            bev_query: r("bev_query"),
+            gkt_weights: r("gkt_weights"),
+            gathered: r("gathered"),
+            camera_bev: region(short),
+            satellite_crop: r("satellite_crop"),
+            satellite_bev: r("satellite_bev"),
+            class_logits: r("class_logits"),
+            points: r("points"),
+        },
+    );
+    assert!(matches!(
+        refused.err(),
+        Some(InitError::Memory(MemoryError::RegionTooSmall {
+            region: "camera_bev",
+            ..
+        }))
+    ));
 }

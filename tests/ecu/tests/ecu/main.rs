@@ -4,6 +4,7 @@
 //! says which bits were proven where.
 
 mod bad_data;
+mod bev_storage;
 mod determinism;
 mod dropout;
 mod lut_kernel;
