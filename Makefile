@@ -11,7 +11,7 @@ PY_VENV := models/.venv
 PY := $(PY_VENV)/bin/python
 CARGO ?= cargo
 
-.PHONY: demo test test-rust test-tiers test-python test-paper test-c lint nostd venv train qat fuzz fuzz-ci \
+.PHONY: demo test test-rust test-tiers test-python test-paper test-f16-bev test-c lint nostd venv train qat fuzz fuzz-ci \
   fuzz-parsers bench-peers \
   cross-toolchain test-aarch64 test-baremetal test-targets insn-counts
 
@@ -37,7 +37,7 @@ test:
 	  echo "--- make venv (run beside the Rust steps):"; cat out/venv.log; \
 	  echo "--- make cross-toolchain (run beside the Rust steps):"; cat out/cross-toolchain.log; \
 	  test $$rust -eq 0 && test "$$(cat out/venv.rc)" -eq 0 && test "$$(cat out/cross-toolchain.rc)" -eq 0
-	$(MAKE) --no-print-directory test-targets test-paper test-python
+	$(MAKE) --no-print-directory test-targets test-paper test-f16-bev test-python
 
 lint:
 	$(CARGO) fmt --all -- --check
@@ -121,6 +121,16 @@ test-python: venv
 # The binary comes from the same `cargo test --workspace` command as test-rust (an integration
 # test of satmap-sim makes cargo build it): `cargo run -p satmap-sim` would resolve dependency
 # features for that one package and recompile tract (~8 min of CI).
+# The BEV feature maps stored as f16 (layouts/nano-f16-bev.toml, docs/limits.md): the core's
+# tests built with that layout, so `FeatureStorage::LAYOUT` is f16 and the caller-placed regions
+# are cut as halves (`placement`), in a target folder of their own (the layout is a build input;
+# sharing target/ would rebuild the workspace crates back and forth). ~1 min on 2 cores. The
+# storage's effect on the maps runs in test-rust (both storages in one build: the ECU test
+# against the goldens, also under qemu, and the arena replay).
+test-f16-bev:
+	SATMAP_LAYOUT=layouts/nano-f16-bev.toml CARGO_TARGET_DIR=target/f16-bev \
+	  $(CARGO) test -p satmap-core
+
 PAPER_BUNDLE := models/build/paper
 PAPER_FRAMES ?= 2
 SATMAP_PY_SOURCES := $(shell find models/src/satmap_ref -name '*.py')
