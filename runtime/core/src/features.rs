@@ -114,10 +114,7 @@ impl FeaturesMut<'_> {
     /// Elements.
     #[must_use]
     pub fn len(&self) -> usize {
-        match self {
-            Self::F32(s) => s.len(),
-            Self::F16(s) => s.len(),
-        }
+        self.as_ref().len()
     }
 
     /// No elements.
@@ -128,11 +125,8 @@ impl FeaturesMut<'_> {
 
     /// The storage.
     #[must_use]
-    pub const fn storage(&self) -> FeatureStorage {
-        match self {
-            Self::F32(_) => FeatureStorage::F32,
-            Self::F16(_) => FeatureStorage::F16,
-        }
+    pub fn storage(&self) -> FeatureStorage {
+        self.as_ref().storage()
     }
 
     /// Write `src`, rounded to the storage (round to nearest even for f16; half's conversion,

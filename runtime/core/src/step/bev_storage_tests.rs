@@ -11,6 +11,7 @@ use crate::buffers::MemoryError;
 use crate::capacity::layout;
 use crate::engine::Engine;
 use crate::features::{FeaturesMut, FeaturesRef};
+use crate::placement::{REGIONS, RuntimeRegions};
 use crate::satellite::FixedCrop;
 use crate::test_support::{FakeEngine, Images, count_allocations, crop, nuscenes_like};
 
@@ -151,30 +152,44 @@ fn region(len: usize) -> &'static mut [u8] {
     &mut v[skip..skip + len]
 }
 
+/// Every region at its layout size, `camera_bev` `short_bytes` shorter.
+fn layout_regions(short_bytes: usize) -> RuntimeRegions {
+    let r = |name: &str| {
+        let bytes = REGIONS
+            .iter()
+            .find(|s| s.name == name)
+            .map_or(0, |s| s.bytes);
+        region(if name == "camera_bev" {
+            bytes - short_bytes
+        } else {
+            bytes
+        })
+    };
+    RuntimeRegions {
+        value_features: r("value_features"),
+        gkt_lut: r("gkt_lut"),
+        bev_query: r("bev_query"),
+        gkt_weights: r("gkt_weights"),
+        gathered: r("gathered"),
+        camera_bev: r("camera_bev"),
+        satellite_crop: r("satellite_crop"),
+        satellite_bev: r("satellite_bev"),
+        class_logits: r("class_logits"),
+        points: r("points"),
+    }
+}
+
 #[test]
 fn placed_regions_hold_the_bevs_in_the_layout_storage_and_step_like_the_heap() {
-    use crate::placement::{REGIONS, RuntimeRegions};
     let dims = ModelDims::test_config();
     let c = crop(&dims);
     let images = Images::new(&dims, 8);
-    let r = |name: &str| region(REGIONS.iter().find(|s| s.name == name).unwrap().bytes);
     let mut placed = SatMap::in_regions(
         FakeEngine::new(dims.clone()),
         &nuscenes_like(),
         FixedCrop(&c),
         FrameLimits::DEFAULT,
-        RuntimeRegions {
-            value_features: r("value_features"),
-            gkt_lut: r("gkt_lut"),
-            bev_query: r("bev_query"),
-            gkt_weights: r("gkt_weights"),
-            gathered: r("gathered"),
-            camera_bev: r("camera_bev"),
-            satellite_crop: r("satellite_crop"),
-            satellite_bev: r("satellite_bev"),
-            class_logits: r("class_logits"),
-            points: r("points"),
-        },
+        layout_regions(0),
     )
     .unwrap();
     assert_eq!(placed.buffers().bev_storage(), FeatureStorage::LAYOUT);
@@ -188,29 +203,12 @@ fn placed_regions_hold_the_bevs_in_the_layout_storage_and_step_like_the_heap() {
         bits(heap.buffers().camera_bev())
     );
     // A BEV region one element short of the layout's storage is refused by name.
-    let short = REGIONS
-        .iter()
-        .find(|s| s.name == "camera_bev")
-        .unwrap()
-        .bytes
-        - FeatureStorage::LAYOUT.elem_bytes();
     let refused = SatMap::in_regions(
         FakeEngine::new(dims),
         &nuscenes_like(),
         FixedCrop(&c),
         FrameLimits::DEFAULT,
-        RuntimeRegions {
-            value_features: r("value_features"),
-            gkt_lut: r("gkt_lut"),
-            bev_query: r("bev_query"),
-            gkt_weights: r("gkt_weights"),
-            gathered: r("gathered"),
-            camera_bev: region(short),
-            satellite_crop: r("satellite_crop"),
-            satellite_bev: r("satellite_bev"),
-            class_logits: r("class_logits"),
-            points: r("points"),
-        },
+        layout_regions(FeatureStorage::LAYOUT.elem_bytes()),
     );
     assert!(matches!(
         refused.err(),
