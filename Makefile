@@ -112,6 +112,16 @@ $(PY_VENV)/.installed: models/pyproject.toml
 test-python: venv
 	$(PY) -m pytest models -q
 
+# The BEV feature maps stored as f16 (layouts/nano-f16-bev.toml, docs/ecu-integration.md): the
+# core's tests built with that layout, so `FeatureStorage::LAYOUT` is f16 and the caller-placed
+# regions are cut as halves (`placement`), in a target folder of their own (the layout is a build input;
+# sharing target/ would rebuild the workspace crates back and forth). ~1 min on 2 cores. The
+# storage's effect on the maps runs in test-rust (both storages in one build: the ECU test
+# against the goldens, also under qemu, and the arena replay).
+test-f16-bev:
+	SATMAP_LAYOUT=layouts/nano-f16-bev.toml CARGO_TARGET_DIR=target/f16-bev \
+	  $(CARGO) test -p satmap-core
+
 # The `paper` product variant end to end: export the paper config (seeded weights, ~15 s) into
 # models/build/paper, build satmap-sim with its memory layout (SATMAP_LAYOUT=layouts/paper.toml:
 # the layout is a build input, so this rebuilds the workspace crates only, and the next build
@@ -121,16 +131,6 @@ test-python: venv
 # The binary comes from the same `cargo test --workspace` command as test-rust (an integration
 # test of satmap-sim makes cargo build it): `cargo run -p satmap-sim` would resolve dependency
 # features for that one package and recompile tract (~8 min of CI).
-# The BEV feature maps stored as f16 (layouts/nano-f16-bev.toml, docs/limits.md): the core's
-# tests built with that layout, so `FeatureStorage::LAYOUT` is f16 and the caller-placed regions
-# are cut as halves (`placement`), in a target folder of their own (the layout is a build input;
-# sharing target/ would rebuild the workspace crates back and forth). ~1 min on 2 cores. The
-# storage's effect on the maps runs in test-rust (both storages in one build: the ECU test
-# against the goldens, also under qemu, and the arena replay).
-test-f16-bev:
-	SATMAP_LAYOUT=layouts/nano-f16-bev.toml CARGO_TARGET_DIR=target/f16-bev \
-	  $(CARGO) test -p satmap-core
-
 PAPER_BUNDLE := models/build/paper
 PAPER_FRAMES ?= 2
 SATMAP_PY_SOURCES := $(shell find models/src/satmap_ref -name '*.py')

@@ -31,7 +31,9 @@
 #include "satmap.h"
 
 /* The caller-owned regions, sized from memory_layout.toml (satmap_region_info says the same;
- * checked below). A linker script would place these in the ECU's RAM sections. */
+ * checked below). A linker script would place these in the ECU's RAM sections. A runtime built
+ * with another layout (layouts/nano-f16-bev.toml halves camera_bev and satellite_bev) has other
+ * sizes: the check below then stops with the region named. */
 #define REGION(name, bytes) static _Alignas(SATMAP_REGION_ALIGN) uint8_t name[bytes]
 REGION(value_features, 368640);
 REGION(gkt_lut, 2345600);

@@ -122,10 +122,11 @@ fn f16_bev_storage_saves_half_the_bevs_and_keeps_the_maps() {
         (wide.report.arena.bev_storage, half.report.arena.bev_storage),
         ("f32", "f16")
     );
-    // `test`: two BEVs of 80 x 40 x 32 values, 2 bytes saved on each.
+    // `test`'s two BEVs (80 x 40 x 32 values each), 2 bytes saved on each value.
+    let bev_len = satmap_runtime::ModelDims::test_config().bev_len();
     assert_eq!(
         wide.report.arena.runtime_regions_bytes - half.report.arena.runtime_regions_bytes,
-        2 * 80 * 40 * 32 * 2
+        2 * bev_len * 2
     );
     let d = satmap_sim::eval::deviation::deviation(&wide.maps, &half.maps);
     println!("f16 BEV storage against f32, 3 steps: {d:?}");

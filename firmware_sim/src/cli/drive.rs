@@ -17,7 +17,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use satmap_runtime::FeatureStorage;
+use satmap_runtime::bundle::Bundle;
 use satmap_runtime::capacity::layout;
+use satmap_runtime::regions::{built_in_capacity, check_regions_with};
 
 use crate::arena::ArenaAllocator;
 use crate::cli::build_pack::CodecArg;
@@ -123,8 +125,9 @@ pub struct Args {
     pub threads: NonZeroUsize,
     /// Storage of the runtime's two BEV feature maps, `f32` or `f16` (default: the layout's,
     /// `f32` in memory_layout.toml): `f16` halves them (6.25 -> 3.1 MiB at nano's size). With
-    /// `--deviation-from`, the reference runs in f32 where the layout holds it, so the figure
-    /// is the storage's effect (with the same bundle) or both precisions' (with another).
+    /// `--deviation-from`, the reference runs in f32 where the layout's regions hold the
+    /// reference's BEVs in f32, so the figure is the storage's effect (with the same bundle) or
+    /// both precisions' (with another).
     #[arg(long, value_parser = parse_bev_storage)]
     pub bev_storage: Option<FeatureStorage>,
 }
@@ -308,13 +311,19 @@ fn print_deviation(
     reference: &Path,
     outcome: &crate::harness::Replay,
 ) -> Result<()> {
-    // The reference in the layout's BEV storage: f32 where the layout holds it (a layout that
-    // gives the BEVs f16 holds nothing else).
+    // The reference in f32 BEV storage where this build's regions hold it (a layout that gives
+    // the BEVs f16 holds f32 ones of a smaller model only).
     let ours_storage = cfg.bev_storage;
+    let reference_dims = Bundle::open(reference)?.dims().clone();
+    let bev_storage =
+        match check_regions_with(&reference_dims, FeatureStorage::F32, built_in_capacity) {
+            Ok(()) => FeatureStorage::F32,
+            Err(_) => FeatureStorage::LAYOUT,
+        };
     let cfg = ReplayConfig {
         bundle_dir: reference.to_path_buf(),
         show_progress: false,
-        bev_storage: FeatureStorage::LAYOUT,
+        bev_storage,
         ..cfg.clone()
     };
     let base = replay(&cfg, None)?;

@@ -1,15 +1,16 @@
 //! How the runtime stores the two BEV feature maps it hands from the encoders to the decoder
-//! (camera BEV and satellite BEV, `[bev_h, bev_w, D]` each, the largest buffers of a step):
-//! f32, or IEEE half (`half::f16`) when the memory layout gives both regions `dtype = "f16"`
-//! (`layouts/nano-f16-bev.toml`), which halves their RAM.
+//! (camera BEV and satellite BEV, `[bev_h, bev_w, D]` each, two of the four largest model-sized
+//! buffers): f32, or IEEE half (`half::f16`) when the memory layout gives both regions
+//! `dtype = "f16"` (`layouts/nano-f16-bev.toml`), which halves their RAM.
 //!
 //! The engines compute in f32 either way: a stage writing a BEV rounds its f32 output to the
 //! storage once ([`FeaturesMut::store`], round to nearest even), the decoder widens it back
-//! exactly ([`FeaturesRef::load`]). A value beyond f16's range (65504) becomes infinite and the
-//! step's finiteness check refuses it ([`crate::StepError::NonFiniteOutput`]): the storage never
-//! saturates silently. The other buffers stay f32: the value features are read sixty times a
-//! query by the gather-sum's hot loop and are a tenth of the BEVs' bytes; queries, GKT weights
-//! and the gathered sum feed float arithmetic of the core itself.
+//! exactly ([`FeaturesRef::load`]). A value of magnitude 65520 or more (past f16's largest,
+//! 65504, by half an ulp) becomes infinite and the step's finiteness check refuses it
+//! ([`crate::StepError::NonFiniteOutput`]): the storage never saturates silently. The other
+//! buffers stay f32: the value features are read sixty times a query by the gather-sum's hot loop
+//! and are a ninth of one BEV's bytes (368,640 against 3,276,800 at nano's size); queries, GKT
+//! weights and the gathered sum feed float arithmetic of the core itself.
 
 use half::f16;
 use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
@@ -31,7 +32,9 @@ impl FeatureStorage {
     /// `satellite_bev`, which `satmap-layout` requires to agree).
     pub const LAYOUT: Self = match layout::CAMERA_BEV_DTYPE.as_bytes() {
         b"f16" => Self::F16,
-        _ => Self::F32,
+        b"f32" => Self::F32,
+        // satmap-layout refuses any other dtype; a const panic fails the build, not a run.
+        _ => panic!("the layout's BEV regions are neither f32 nor f16"),
     };
 
     /// Bytes of one element.
@@ -84,7 +87,8 @@ const fn same_name(a: &str, b: &str) -> bool {
     true
 }
 
-/// A feature map's length differs from what was written into it or read out of it.
+/// A feature map's length differs from what was written into it or read out of it (engines
+/// report it as their stage's `EngineErrorKind::ShapeMismatch`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LengthMismatch {
     /// Elements of the feature map.
@@ -92,6 +96,18 @@ pub struct LengthMismatch {
     /// Elements given.
     pub got: usize,
 }
+
+impl core::fmt::Display for LengthMismatch {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "a feature map of {} elements given {} values",
+            self.expected, self.got
+        )
+    }
+}
+
+impl core::error::Error for LengthMismatch {}
 
 fn same_len(expected: usize, got: usize) -> Result<(), LengthMismatch> {
     if expected == got {
@@ -321,7 +337,8 @@ mod tests {
 
     #[test]
     fn f16_storage_rounds_once_to_nearest_even_and_widens_exactly() {
-        // 1 + 2^-11 is halfway between two halves: ties to even (1.0); 1 + 3 * 2^-11 rounds up.
+        // 1 + 2^-11 and 1 + 3 * 2^-11 are both halfway between two halves: ties go to the even
+        // one, 1.0 for the first, 1 + 2^-9 (above) for the second.
         let src = [
             1.0 + 2f32.powi(-11),
             1.0 + 3.0 * 2f32.powi(-11),
@@ -346,6 +363,15 @@ mod tests {
     fn a_value_beyond_half_range_is_stored_infinite_so_the_finite_check_sees_it() {
         let mut slab = FeatureSlab::zeroed(2, FeatureStorage::F16).unwrap();
         slab.as_mut().store(&[1.0, 70000.0]).unwrap();
+        assert!(!slab.as_ref().all_finite());
+        // The edge: below 65520 rounds to the largest half, from 65520 on it is infinite.
+        slab.as_mut().store(&[65519.0, -65519.0]).unwrap();
+        assert_eq!(
+            slab.as_ref().iter().collect::<alloc::vec::Vec<_>>(),
+            [65504.0, -65504.0]
+        );
+        slab.as_mut().store(&[65520.0, 1.0]).unwrap();
+        assert_eq!(slab.as_ref().get(0), Some(f32::INFINITY));
         assert!(!slab.as_ref().all_finite());
         let mut wide = FeatureSlab::zeroed(2, FeatureStorage::F32).unwrap();
         wide.as_mut().store(&[1.0, 70000.0]).unwrap();

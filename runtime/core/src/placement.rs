@@ -178,7 +178,17 @@ fn features(
         FeatureStorage::F32 => PlacedFeatures::F32(f32s(spec, region, len)?),
         FeatureStorage::F16 => {
             let region = checked(spec, region)?;
-            PlacedFeatures::F16(u16s(spec, &mut region[..len * 2])?)
+            let capacity_bytes = region.len();
+            // `check_regions` made the layout's region hold `len` halves; this keeps the cut
+            // from relying on it.
+            let bytes = len.checked_mul(2).and_then(|n| region.get_mut(..n)).ok_or(
+                MemoryError::RegionTooSmall {
+                    region: spec.name,
+                    needed_bytes: len.saturating_mul(2),
+                    capacity_bytes,
+                },
+            )?;
+            PlacedFeatures::F16(u16s(spec, bytes)?)
         }
     })
 }

@@ -5,8 +5,9 @@ use std::fmt::Write as _;
 use crate::MemoryLayout;
 
 impl MemoryLayout {
-    /// Rust source with one `pub const <NAME>_BYTES: usize`, `<NAME>_DTYPE` and `<NAME>_SHAPE` per region, the
-    /// arena sizes and the budgets: what `runtime/core/build.rs` writes to `OUT_DIR`.
+    /// Rust source with one `pub const <NAME>_BYTES: usize`, `<NAME>_DTYPE` and `<NAME>_SHAPE`
+    /// per region, the arena sizes and the budgets: what `runtime/core/build.rs` writes to
+    /// `OUT_DIR`.
     #[must_use]
     pub fn to_rust_consts(&self) -> String {
         let mut s = String::from(

@@ -87,8 +87,8 @@ impl<E: Engine, S: SatelliteSource> SatMap<E, S> {
 
     /// As [`SatMap::with_limits`], with the two BEV feature maps reserved in `bev` storage
     /// instead of the layout's ([`FeatureStorage::LAYOUT`]): to compare both storages in one
-    /// build. They must fit the layout's regions in that storage (f32 BEVs do not fit a layout
-    /// that gives them f16).
+    /// build. They must fit the layout's regions in that storage (f32 BEVs of the size a layout
+    /// gives f16 do not: nano's in `layouts/nano-f16-bev.toml`).
     ///
     /// # Errors
     /// As [`SatMap::with_limits`].
