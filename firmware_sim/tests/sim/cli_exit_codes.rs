@@ -58,6 +58,10 @@ fn bad_input_in_every_tool_exits_2_naming_what_is_wrong() {
             vec!["compile", "--bundle", &compiled, "--out", &out],
             "already a compiled bundle",
         ),
+        (
+            vec!["drive", "--frames", "1", "--bev-storage", "bf16"],
+            "give f32 or f16",
+        ),
         (vec!["memory-map", "--layout", &bad_toml], "does not parse"),
         (vec!["memory-map", "--layout", &missing], "missing.toml"),
         (
