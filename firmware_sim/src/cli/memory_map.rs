@@ -55,10 +55,9 @@ pub fn read_layout(path: Option<&Path>) -> Result<MemoryLayout> {
 /// are f32 or both f16).
 #[must_use]
 pub fn bev_storage(map: &MemoryLayout) -> FeatureStorage {
-    match map.region("camera_bev").map(|r| r.dtype) {
-        Some(satmap_layout::DType::F16) => FeatureStorage::F16,
-        _ => FeatureStorage::F32,
-    }
+    map.region("camera_bev")
+        .and_then(|r| FeatureStorage::from_name(r.dtype.name()))
+        .unwrap_or(FeatureStorage::F32)
 }
 
 /// Arguments of `memory-map`.

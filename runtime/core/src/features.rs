@@ -30,12 +30,17 @@ pub enum FeatureStorage {
 impl FeatureStorage {
     /// The storage the memory layout of this build gives the BEV regions (`camera_bev` and
     /// `satellite_bev`, which `satmap-layout` requires to agree).
-    pub const LAYOUT: Self = match layout::CAMERA_BEV_DTYPE.as_bytes() {
-        b"f16" => Self::F16,
-        b"f32" => Self::F32,
-        // satmap-layout refuses any other dtype; a const panic fails the build, not a run.
-        _ => panic!("the layout's BEV regions are neither f32 nor f16"),
-    };
+    pub const LAYOUT: Self = Self::of_layout_dtype(layout::CAMERA_BEV_DTYPE);
+
+    /// The storage of a BEV region's layout dtype. satmap-layout refuses any dtype but these
+    /// two; called in a const, the panic fails the build, never a run.
+    const fn of_layout_dtype(dtype: &str) -> Self {
+        match dtype.as_bytes() {
+            b"f16" => Self::F16,
+            b"f32" => Self::F32,
+            _ => panic!("the layout's BEV regions are neither f32 nor f16"),
+        }
+    }
 
     /// Bytes of one element.
     #[must_use]
@@ -67,25 +72,13 @@ impl FeatureStorage {
 }
 
 // Both BEV regions have one storage (`satmap-layout` checks it; this is the build's own guard).
-const _: () = assert!(same_name(
-    layout::CAMERA_BEV_DTYPE,
-    layout::SATELLITE_BEV_DTYPE
+const _: () = assert!(matches!(
+    (
+        FeatureStorage::LAYOUT,
+        FeatureStorage::of_layout_dtype(layout::SATELLITE_BEV_DTYPE)
+    ),
+    (FeatureStorage::F32, FeatureStorage::F32) | (FeatureStorage::F16, FeatureStorage::F16)
 ));
-
-const fn same_name(a: &str, b: &str) -> bool {
-    let (a, b) = (a.as_bytes(), b.as_bytes());
-    if a.len() != b.len() {
-        return false;
-    }
-    let mut i = 0;
-    while i < a.len() {
-        if a[i] != b[i] {
-            return false;
-        }
-        i += 1;
-    }
-    true
-}
 
 /// A feature map's length differs from what was written into it or read out of it (engines
 /// report it as their stage's `EngineErrorKind::ShapeMismatch`).

@@ -33,7 +33,7 @@ fn bits(bev: FeaturesRef<'_>) -> Vec<u16> {
 }
 
 fn rounded(wide: &[f32]) -> Vec<u16> {
-    wide.iter().map(|&v| f16::from_f32(v).to_bits()).collect()
+    bits(FeaturesRef::F32(wide))
 }
 
 #[test]
